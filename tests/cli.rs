@@ -1,0 +1,241 @@
+//! The `physnap export` command as a user runs it: success path, env twins, and clear errors
+//! that name the field, the limit and the value.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn physnap(args: &[&str], envs: &[(&str, &str)]) -> Output {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_physnap"));
+    cmd.args(args).env("PHYSNAP_LOG", "warn");
+    for (k, v) in envs {
+        cmd.env(k, v);
+    }
+    cmd.output().expect("run physnap")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn write(dir: &Path, name: &str, text: &str) -> String {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p.display().to_string()
+}
+
+const EXAMPLE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/cabinet.json");
+
+#[test]
+fn export_writes_all_artefacts() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let o = physnap(
+        &[
+            "export",
+            "--object",
+            EXAMPLE,
+            "--out",
+            out.to_str().unwrap(),
+            "--resolution",
+            "32",
+        ],
+        &[],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in [
+        "model.glb",
+        "robot.urdf",
+        "robot.zip",
+        "object.json",
+        "meshes/body.obj",
+        "meshes/door.obj",
+        "meshes/drawer.obj",
+    ] {
+        assert!(out.join(f).is_file(), "missing {f}");
+    }
+    // The printed file list is what a script would consume.
+    let listed = String::from_utf8_lossy(&o.stdout);
+    assert!(listed.lines().any(|l| l.ends_with("model.glb")));
+}
+
+#[test]
+fn env_twins_replace_flags() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let o = physnap(
+        &["export"],
+        &[
+            ("PHYSNAP_OBJECT", EXAMPLE),
+            ("PHYSNAP_OUT", out.to_str().unwrap()),
+            ("PHYSNAP_MC_RESOLUTION", "16"),
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(out.join("model.glb").is_file());
+}
+
+fn export_err(dir: &Path, json: &str) -> String {
+    let obj = write(dir, "bad.json", json);
+    let o = physnap(
+        &[
+            "export",
+            "--object",
+            &obj,
+            "--out",
+            dir.join("o").to_str().unwrap(),
+        ],
+        &[],
+    );
+    assert!(!o.status.success(), "a bad object must fail");
+    assert!(
+        !dir.join("o/model.glb").exists(),
+        "nothing is written for a bad object"
+    );
+    stderr(&o)
+}
+
+fn cabinet_with(f: impl FnOnce(&mut serde_json::Value)) -> String {
+    let mut v: serde_json::Value = serde_json::from_str(physnap::fixtures::CABINET_JSON).unwrap();
+    f(&mut v);
+    v.to_string()
+}
+
+#[test]
+fn malformed_json_names_the_place() {
+    let dir = tempfile::tempdir().unwrap();
+    let e = export_err(
+        dir.path(),
+        "{\"name\": \"x\", \"parts\": [ {\"name\": 3} ]}",
+    );
+    assert!(
+        e.contains("malformed object JSON") && e.contains("parts[0].name"),
+        "{e}"
+    );
+    let e = export_err(dir.path(), "{ not json");
+    assert!(
+        e.contains("malformed object JSON") && e.contains("line 1"),
+        "{e}"
+    );
+    let e = export_err(
+        dir.path(),
+        &cabinet_with(|v| v["parts"][0]["colour"] = "red".into()),
+    );
+    assert!(e.contains("unknown field `colour`"), "{e}");
+}
+
+#[test]
+fn negative_box_size_names_field_limit_and_value() {
+    let dir = tempfile::tempdir().unwrap();
+    let e = export_err(
+        dir.path(),
+        &cabinet_with(|v| v["parts"][1]["half_extents"][2] = (-0.5).into()),
+    );
+    assert!(
+        e.contains("parts[1].half_extents[2]") && e.contains("> 0") && e.contains("-0.5"),
+        "{e}"
+    );
+}
+
+#[test]
+fn non_finite_values_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    // JSON has no NaN; a literal NaN or an overflowing number is refused by the parser, with its place.
+    let text = physnap::fixtures::CABINET_JSON.replacen("[0.0, 0.0, 0.4]", "[0.0, NaN, 0.4]", 1);
+    let e = export_err(dir.path(), &text);
+    assert!(
+        e.contains("malformed object JSON") && e.contains("parts[0].center"),
+        "{e}"
+    );
+    let text = physnap::fixtures::CABINET_JSON.replacen("[0.0, 0.0, 0.4]", "[0.0, 1e999, 0.4]", 1);
+    let e = export_err(dir.path(), &text);
+    assert!(e.contains("parts[0].center"), "{e}");
+}
+
+#[test]
+fn more_than_eight_parts_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let e = export_err(
+        dir.path(),
+        &cabinet_with(|v| {
+            let door = v["parts"][1].clone();
+            let parts = v["parts"].as_array_mut().unwrap();
+            for i in 0..7 {
+                let mut p = door.clone();
+                p["name"] = format!("extra{i}").into();
+                parts.push(p);
+            }
+        }),
+    );
+    assert!(
+        e.contains("parts") && e.contains("between 1 and 8") && e.contains("10 parts"),
+        "{e}"
+    );
+}
+
+#[test]
+fn bad_joint_references_and_axes_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let e = export_err(
+        dir.path(),
+        &cabinet_with(|v| v["joints"][0]["child"] = "lid".into()),
+    );
+    assert!(
+        e.contains("joints[0].child") && e.contains("\"lid\""),
+        "{e}"
+    );
+    let e = export_err(
+        dir.path(),
+        &cabinet_with(|v| v["joints"][1]["axis"] = serde_json::json!([0, 0, 0])),
+    );
+    assert!(
+        e.contains("joints[1].axis") && e.contains("non-zero"),
+        "{e}"
+    );
+    let e = export_err(
+        dir.path(),
+        &cabinet_with(|v| v["joints"][0]["revolute"] = serde_json::json!([2.0, 1.0])),
+    );
+    assert!(
+        e.contains("joints[0].revolute") && e.contains("lower <= upper") && e.contains("[2, 1]"),
+        "{e}"
+    );
+}
+
+#[test]
+fn bad_resolution_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = physnap(
+        &[
+            "export",
+            "--object",
+            EXAMPLE,
+            "--out",
+            dir.path().to_str().unwrap(),
+            "--resolution",
+            "1000",
+        ],
+        &[],
+    );
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(
+        e.contains("resolution") && e.contains("between 8 and 256") && e.contains("1000"),
+        "{e}"
+    );
+}
+
+#[test]
+fn missing_file_is_reported() {
+    let o = physnap(
+        &[
+            "export",
+            "--object",
+            "/nonexistent/x.json",
+            "--out",
+            "/tmp/x",
+        ],
+        &[],
+    );
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("/nonexistent/x.json"), "{}", stderr(&o));
+}

@@ -4,6 +4,7 @@
 //! Start reading at ARCHITECTURE.md. The core types are [`object::ArticulatedObject`] (what
 //! users get) and [`graph::GraphTensor`] (what the diffusion model sees).
 
+pub mod data;
 pub mod error;
 pub mod export;
 pub mod fixtures;

@@ -13,6 +13,7 @@ pub mod io;
 pub mod kinematics;
 pub mod mesh;
 pub mod object;
+pub mod pointcloud;
 pub mod shape;
 
 pub use error::{CoreError, CoreResult};

@@ -275,6 +275,89 @@ impl ArticulatedObject {
     }
 }
 
+impl ArticulatedObject {
+    /// Merge every fixed-joint child into its parent (method.md §1.2: a node is a rigid link
+    /// with its fixed-joint children). Shapes become unions of primitives in the merged part's
+    /// frame (a `Box` part becomes one cuboid); boxes become the union of the boxes. Latent
+    /// shapes cannot be merged: a fixed joint under a latent part is an error.
+    ///
+    /// Returns the merged object and, for every old part, the index of the part it went into.
+    pub fn merge_fixed(&self) -> CoreResult<(ArticulatedObject, Vec<usize>)> {
+        self.validate()?;
+        let n = self.parts.len();
+        // Representative (movable ancestor or root) of every part.
+        let mut rep: Vec<usize> = (0..n).collect();
+        for k in self.joints_topological() {
+            let j = &self.joints[k];
+            if j.kind == JointKind::Fixed {
+                rep[j.child] = rep[j.parent];
+            }
+        }
+        let kept: Vec<usize> = (0..n).filter(|&p| rep[p] == p).collect();
+        let new_index = |p: usize| kept.iter().position(|&q| q == rep[p]).unwrap_or(0);
+        let mut parts = Vec::with_capacity(kept.len());
+        for &k in &kept {
+            let members: Vec<usize> = (0..n).filter(|&p| rep[p] == k).collect();
+            if members.len() == 1 {
+                parts.push(self.parts[k].clone());
+                continue;
+            }
+            let (mut lo, mut hi) = (Vector3::repeat(f64::INFINITY), Vector3::repeat(f64::NEG_INFINITY));
+            for &m in &members {
+                let p = &self.parts[m];
+                lo = lo.inf(&(p.center - p.half_extents));
+                hi = hi.sup(&(p.center + p.half_extents));
+            }
+            let center = (lo + hi) / 2.0;
+            let mut prims = Vec::new();
+            for &m in &members {
+                let p = &self.parts[m];
+                let offset = p.center - center;
+                match &p.shape {
+                    PartShape::Box => prims.push(Primitive::Cuboid {
+                        center: offset,
+                        half_extents: p.half_extents,
+                    }),
+                    PartShape::Primitives(list) => {
+                        prims.extend(list.iter().map(|q| q.translated(&offset)))
+                    }
+                    PartShape::Latent(_) => {
+                        return Err(CoreError::invalid(
+                            format!("parts[{m}].shape"),
+                            "an analytic shape (latent parts cannot be merged by a fixed joint)",
+                            "latent",
+                        ));
+                    }
+                }
+            }
+            parts.push(Part {
+                name: self.parts[k].name.clone(),
+                half_extents: (hi - lo) / 2.0,
+                center,
+                shape: PartShape::Primitives(prims),
+            });
+        }
+        let joints = self
+            .joints
+            .iter()
+            .filter(|j| j.kind != JointKind::Fixed)
+            .map(|j| Joint {
+                parent: new_index(j.parent),
+                child: new_index(j.child),
+                ..j.clone()
+            })
+            .collect();
+        let merged = ArticulatedObject {
+            name: self.name.clone(),
+            category: self.category.clone(),
+            parts,
+            joints,
+        };
+        merged.validate()?;
+        Ok((merged, (0..n).map(new_index).collect()))
+    }
+}
+
 fn validate_part(i: usize, p: &Part) -> CoreResult<()> {
     if p.name.trim().is_empty() {
         return Err(CoreError::invalid(
@@ -521,5 +604,33 @@ mod tests {
             e.contains("parts") && e.contains("between 1 and 8") && e.contains("10 parts"),
             "{e}"
         );
+    }
+}
+
+#[cfg(test)]
+mod merge_tests {
+    use super::*;
+
+    #[test]
+    fn fixed_children_merge_into_their_parent() {
+        let obj = crate::fixtures::eight_part();
+        let (m, map) = obj.merge_fixed().unwrap();
+        assert_eq!(m.parts.len(), 7);
+        assert_eq!(map[1], map[0], "the plinth merges into the body");
+        assert!(m.joints.iter().all(|j| j.kind != JointKind::Fixed));
+        let body = &m.parts[map[0]];
+        // The merged box spans both the body and the plinth.
+        assert!((body.center.z - 0.55).abs() < 1e-12 && (body.half_extents.z - 0.55).abs() < 1e-12);
+        // Geometry is preserved: the plinth's centre is inside the merged union.
+        let sdf = crate::shape::AnalyticSdf {
+            primitives: match &body.shape {
+                PartShape::Primitives(p) => p,
+                _ => panic!("merged shape is a union"),
+            },
+            half_extents: body.half_extents,
+            kappa: body.kappa(),
+        };
+        let plinth_centre = obj.parts[1].center - body.center;
+        assert!(sdf.local(&plinth_centre) < 0.0);
     }
 }

@@ -116,6 +116,17 @@ impl Primitive {
         }
     }
 
+    /// The same primitive moved by `offset`.
+    pub fn translated(&self, offset: &Vector3<f64>) -> Primitive {
+        let mut p = self.clone();
+        match &mut p {
+            Primitive::Cuboid { center, .. }
+            | Primitive::Sphere { center, .. }
+            | Primitive::Cylinder { center, .. } => *center += offset,
+        }
+        p
+    }
+
     /// Axis-aligned bounds (min, max) in the part frame.
     pub fn bounds(&self) -> (Vector3<f64>, Vector3<f64>) {
         match self {

@@ -8,6 +8,7 @@
 //! samples and splits. `scan` renders the paper's partial point clouds.
 
 pub mod categories;
+pub mod partnet;
 pub mod rng;
 
 use crate::object::ArticulatedObject;

@@ -11,6 +11,7 @@
 //! the current rayon pool, so a neural decoder sees thousands of points per call.
 
 pub mod marching_cubes;
+pub mod obj;
 pub mod primitives;
 
 use nalgebra::Vector3;

@@ -13,6 +13,8 @@ use clap::{Args, Parser, Subcommand};
 use physnap::export::{ExportOptions, export_dir, mesh_parts};
 use physnap::mesh::MeshingOptions;
 
+mod data_cmd;
+
 // mimalloc instead of glibc malloc: the ML stack allocates and frees many short-lived buffers
 // per step, and glibc's allocator roughly doubles backward-pass time (ml-stack.md §TL;DR).
 #[global_allocator]
@@ -34,6 +36,103 @@ struct Cli {
 enum Command {
     /// Write GLB + URDF (+ meshes, zip bundle) for an articulated-object JSON.
     Export(ExportArgs),
+    /// Data sets: procedural objects, PartNet-Mobility import, partial scans.
+    Data {
+        #[command(subcommand)]
+        command: DataCommand,
+    },
+}
+
+#[derive(Subcommand, Debug)]
+enum DataCommand {
+    /// Generate procedural articulated objects in the PartNet-Mobility layout.
+    Synth(SynthArgs),
+    /// Build the training set (graph records, part meshes, SDF samples, splits) from a
+    /// folder of PartNet-Mobility-layout objects (real or synthetic).
+    Import(ImportArgs),
+    /// Render one partial point-cloud scan of an object folder (PartNet-Mobility layout).
+    Scan(ScanArgs),
+    /// Make a test set: COUNT objects of a split of an imported data set, one scan each.
+    Testset(TestsetArgs),
+}
+
+#[derive(Args, Debug)]
+struct SynthArgs {
+    /// Output directory (one folder per object, plus synth.json).
+    #[arg(long, env = "PHYSNAP_OUT")]
+    out: PathBuf,
+    /// Number of objects.
+    #[arg(long, env = "PHYSNAP_SYNTH_OBJECTS", default_value_t = 1000)]
+    objects: usize,
+    /// Random seed; the same seed gives byte-identical output.
+    #[arg(long, env = "PHYSNAP_SEED", default_value_t = 0)]
+    seed: u64,
+    /// Comma-separated categories (default: all the generator supports).
+    #[arg(long, env = "PHYSNAP_SYNTH_CATEGORIES", value_delimiter = ',')]
+    categories: Vec<String>,
+    /// Draws per object before giving up on it.
+    #[arg(long, env = "PHYSNAP_SYNTH_MAX_ATTEMPTS", default_value_t = 200)]
+    max_attempts: usize,
+}
+
+#[derive(Args, Debug)]
+struct ImportArgs {
+    /// Folder of PartNet-Mobility-layout object folders.
+    #[arg(long = "partnet-mobility", env = "PHYSNAP_PARTNET_MOBILITY")]
+    src: PathBuf,
+    /// Output directory for the training set.
+    #[arg(long, env = "PHYSNAP_OUT")]
+    out: PathBuf,
+    /// Seed for SDF sampling and splits.
+    #[arg(long, env = "PHYSNAP_SEED", default_value_t = 0)]
+    seed: u64,
+    /// Uniform SDF samples per part.
+    #[arg(long, env = "PHYSNAP_IMPORT_UNIFORM", default_value_t = 4096)]
+    uniform: usize,
+    /// Near-surface SDF samples per part.
+    #[arg(long, env = "PHYSNAP_IMPORT_NEAR", default_value_t = 4096)]
+    near: usize,
+    /// Surface points per part (shape-encoder input).
+    #[arg(long, env = "PHYSNAP_IMPORT_SURFACE", default_value_t = 1024)]
+    surface: usize,
+}
+
+#[derive(Args, Debug)]
+struct ScanArgs {
+    /// Object folder (PartNet-Mobility layout, e.g. one written by `data synth`).
+    #[arg(long, env = "PHYSNAP_SCAN_OBJECT")]
+    object: PathBuf,
+    /// Output point cloud: .ply, .npy or .json.
+    #[arg(long, env = "PHYSNAP_OUT")]
+    out: PathBuf,
+    /// Random seed (camera pose and pixels).
+    #[arg(long, env = "PHYSNAP_SEED", default_value_t = 0)]
+    seed: u64,
+    /// Points per scan.
+    #[arg(long, env = "PHYSNAP_SCAN_POINTS", default_value_t = 1000)]
+    points: usize,
+    /// Also write a coloured PLY with the object's surface (grey) and the scan (red).
+    #[arg(long, env = "PHYSNAP_SCAN_PREVIEW")]
+    preview: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+struct TestsetArgs {
+    /// Imported data set (output of `data import`).
+    #[arg(long, env = "PHYSNAP_DATA")]
+    data: PathBuf,
+    /// Output directory: <id>.ply per object plus testset.json.
+    #[arg(long, env = "PHYSNAP_OUT")]
+    out: PathBuf,
+    /// Number of objects (the paper uses 30).
+    #[arg(long, env = "PHYSNAP_TESTSET_COUNT", default_value_t = 30)]
+    count: usize,
+    /// Split to draw from.
+    #[arg(long, env = "PHYSNAP_TESTSET_SPLIT", default_value = "test")]
+    split: String,
+    /// Random seed (object choice, camera poses).
+    #[arg(long, env = "PHYSNAP_SEED", default_value_t = 0)]
+    seed: u64,
 }
 
 #[derive(Args, Debug)]
@@ -79,6 +178,12 @@ fn main() -> ExitCode {
 fn run(command: Command) -> anyhow::Result<()> {
     match command {
         Command::Export(a) => export(a),
+        Command::Data { command } => match command {
+            DataCommand::Synth(a) => data_cmd::synth(a),
+            DataCommand::Import(a) => data_cmd::import(a),
+            DataCommand::Scan(a) => data_cmd::scan(a),
+            DataCommand::Testset(a) => data_cmd::testset(a),
+        },
     }
 }
 

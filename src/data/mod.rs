@@ -8,8 +8,11 @@
 //! samples and splits. `scan` renders the paper's partial point clouds.
 
 pub mod categories;
+pub mod dataset;
+pub mod generate;
 pub mod partnet;
 pub mod rng;
+pub mod scan;
 
 use crate::object::ArticulatedObject;
 

@@ -1,0 +1,222 @@
+//! `physnap data …` subcommands: argument checking, progress bars, reports.
+//!
+//! The work itself lives in `physnap::data`; this module only wires flags to it and prints
+//! what happened (histograms, skip reasons, output paths).
+
+use std::path::Path;
+
+use anyhow::{Context, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use physnap::data::categories::{SYNTH_CATEGORIES, canonical_name};
+use physnap::data::dataset::{ImportOptions, import_dir, load_object_meshes};
+use physnap::data::generate::{SynthOptions, synthesize};
+use physnap::data::partnet::read_object;
+use physnap::data::rng::Rng;
+use physnap::data::scan::{ScanOptions, scan as scan_object};
+use physnap::pointcloud::{Format, PointCloud, write_coloured_ply};
+
+use super::{ImportArgs, ScanArgs, SynthArgs, TestsetArgs};
+
+fn bar(total: usize, what: &str) -> ProgressBar {
+    let pb = ProgressBar::new(total as u64);
+    pb.set_style(
+        ProgressStyle::with_template("{msg:>10} [{bar:40}] {pos}/{len} {per_sec} eta {eta}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    pb.set_message(what.to_string());
+    pb
+}
+
+pub fn synth(a: SynthArgs) -> anyhow::Result<()> {
+    let categories: Vec<String> = if a.categories.is_empty() {
+        SYNTH_CATEGORIES.iter().map(|s| s.to_string()).collect()
+    } else {
+        a.categories
+            .iter()
+            .map(|c| match canonical_name(c) {
+                Some(n) if SYNTH_CATEGORIES.contains(&n) => Ok(n.to_string()),
+                _ => bail!(
+                    "invalid --categories: {c:?} (must be one of {})",
+                    SYNTH_CATEGORIES.join(", ")
+                ),
+            })
+            .collect::<anyhow::Result<_>>()?
+    };
+    if a.objects == 0 {
+        bail!("invalid --objects: 0 (must be at least 1)");
+    }
+    let pb = bar(a.objects, "synth");
+    let t0 = std::time::Instant::now();
+    let report = synthesize(
+        &a.out,
+        &SynthOptions {
+            objects: a.objects,
+            seed: a.seed,
+            categories,
+            max_attempts: a.max_attempts,
+        },
+        &|n, _| pb.set_position(n as u64),
+    )?;
+    pb.finish_and_clear();
+    let secs = t0.elapsed().as_secs_f64();
+    println!(
+        "wrote {} objects to {} in {secs:.1} s ({:.1} objects/s)",
+        report.written,
+        a.out.display(),
+        report.written as f64 / secs
+    );
+    println!("parts per object:");
+    for (k, v) in &report.part_histogram {
+        println!("  {k}: {v}");
+    }
+    println!("objects (rejected draws) per category:");
+    for (c, v) in &report.per_category {
+        println!("  {c}: {v} ({})", report.rejected.get(c).copied().unwrap_or(0));
+    }
+    println!("joints per type:");
+    for (k, v) in &report.joint_histogram {
+        println!("  {k}: {v}");
+    }
+    for (i, r) in &report.failed {
+        eprintln!("object {i} not generated: {r}");
+    }
+    println!("report: {}", a.out.join("synth.json").display());
+    Ok(())
+}
+
+pub fn import(a: ImportArgs) -> anyhow::Result<()> {
+    let total = physnap::data::dataset::object_dirs(&a.src)
+        .with_context(|| format!("listing {}", a.src.display()))?
+        .len();
+    if total == 0 {
+        bail!(
+            "no objects in {} (expected folders containing mobility_v2.json)",
+            a.src.display()
+        );
+    }
+    let pb = bar(total, "import");
+    let t0 = std::time::Instant::now();
+    let report = import_dir(
+        &a.src,
+        &a.out,
+        &ImportOptions {
+            seed: a.seed,
+            uniform: a.uniform,
+            near: a.near,
+            surface: a.surface,
+        },
+        &|n, _| pb.set_position(n as u64),
+    )?;
+    pb.finish_and_clear();
+    let secs = t0.elapsed().as_secs_f64();
+    let count = |s: &str| report.entries.iter().filter(|e| e.split == s).count();
+    println!(
+        "imported {} of {total} objects in {secs:.1} s ({:.1} objects/s): train {}, val {}, test {}",
+        report.entries.len(),
+        report.entries.len() as f64 / secs,
+        count("train"),
+        count("val"),
+        count("test")
+    );
+    for (id, reason) in &report.skipped {
+        println!("skipped {id}: {reason}");
+    }
+    println!("index: {}", a.out.join("dataset.json").display());
+    Ok(())
+}
+
+fn write_cloud(points: Vec<[f32; 3]>, out: &Path) -> anyhow::Result<()> {
+    let format = Format::from_path(out)
+        .with_context(|| format!("invalid --out {}: extension must be .ply, .npy or .json", out.display()))?;
+    PointCloud { points }.write(out, format)?;
+    Ok(())
+}
+
+pub fn scan(a: ScanArgs) -> anyhow::Result<()> {
+    let obj = read_object(&a.object).with_context(|| format!("reading {}", a.object.display()))?;
+    let opts = ScanOptions {
+        points: a.points,
+        ..Default::default()
+    };
+    let mut rng = Rng::new(a.seed);
+    let s = scan_object(&obj.meshes, &mut rng, &opts)?;
+    if let Some(preview) = &a.preview {
+        let all = physnap::data::scan::merge_meshes(&obj.meshes);
+        let mut pts = Vec::new();
+        let mut colours = Vec::new();
+        let bvh = physnap::mesh::bvh::MeshBvh::new(&all.positions, &all.triangles)
+            .map_err(|e| anyhow::anyhow!(e))?;
+        for (p, _) in bvh.sample_surface(20_000, &mut || rng.uniform()) {
+            pts.push(p);
+            colours.push([170, 170, 170]);
+        }
+        pts.extend_from_slice(&s.points);
+        colours.extend(std::iter::repeat_n([220, 30, 30], s.points.len()));
+        write_coloured_ply(preview, &pts, &colours)?;
+    }
+    write_cloud(s.points, &a.out)?;
+    println!(
+        "{} points, elevation {:.1}°, azimuth {:.1}°, distance {:.2} radii, {} pose(s) drawn -> {}",
+        a.points,
+        s.elevation,
+        s.azimuth,
+        s.distance,
+        s.attempts,
+        a.out.display()
+    );
+    Ok(())
+}
+
+pub fn testset(a: TestsetArgs) -> anyhow::Result<()> {
+    let index_path = a.data.join("dataset.json");
+    let index: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(&index_path).with_context(|| format!("reading {}", index_path.display()))?,
+    )
+    .with_context(|| format!("parsing {}", index_path.display()))?;
+    let mut ids: Vec<String> = index["splits"][a.split.as_str()]
+        .as_array()
+        .with_context(|| format!("invalid --split {:?} (must be train, val or test)", a.split))?
+        .iter()
+        .filter_map(|v| v.as_str().map(String::from))
+        .collect();
+    if ids.len() < a.count {
+        bail!(
+            "invalid --count: {} (the {} split has only {} objects)",
+            a.count,
+            a.split,
+            ids.len()
+        );
+    }
+    // Deterministic choice without replacement: shuffle by the seed, take the first COUNT.
+    let mut rng = Rng::new(a.seed);
+    for i in (1..ids.len()).rev() {
+        ids.swap(i, rng.int(0, i));
+    }
+    ids.truncate(a.count);
+    ids.sort();
+    std::fs::create_dir_all(&a.out)?;
+    let pb = bar(ids.len(), "scan");
+    let mut entries = Vec::new();
+    for (k, id) in ids.iter().enumerate() {
+        let (object, meshes) = load_object_meshes(&a.data.join("objects").join(id))?;
+        let mut rng = Rng::fork(a.seed, k as u64);
+        let s = scan_object(&meshes, &mut rng, &ScanOptions::default())
+            .with_context(|| format!("scanning {id}"))?;
+        write_cloud(s.points, &a.out.join(format!("{id}.ply")))?;
+        entries.push(serde_json::json!({
+            "id": id, "category": object.category, "cloud": format!("{id}.ply"),
+            "elevation_deg": s.elevation, "azimuth_deg": s.azimuth, "distance_radii": s.distance,
+            "eye": [s.camera.eye.x, s.camera.eye.y, s.camera.eye.z],
+            "target": [s.camera.target.x, s.camera.target.y, s.camera.target.z],
+            "fov_deg": s.camera.fov_deg, "image": s.camera.image,
+        }));
+        pb.set_position(k as u64 + 1);
+    }
+    pb.finish_and_clear();
+    let out = serde_json::json!({ "data": a.data.display().to_string(), "split": a.split, "seed": a.seed, "clouds": entries });
+    std::fs::write(a.out.join("testset.json"), serde_json::to_string_pretty(&out)?)?;
+    println!("{} scans -> {}", ids.len(), a.out.display());
+    Ok(())
+}

@@ -9,6 +9,8 @@
 
 pub mod categories;
 pub mod rng;
+pub mod synth;
+pub mod validity;
 
 use crate::object::ArticulatedObject;
 

@@ -13,6 +13,8 @@ pub mod generate;
 pub mod partnet;
 pub mod rng;
 pub mod scan;
+pub mod synth;
+pub mod validity;
 
 use crate::object::ArticulatedObject;
 

@@ -1,0 +1,97 @@
+//! The procedural generator of articulated objects (data.md §C.5).
+//!
+//! Why it exists: the shape and diffusion priors need thousands of articulated objects with
+//! exact part shapes and PartNet-Mobility-like structure, and PartNet-Mobility itself cannot be
+//! downloaded here. [`generate`] draws one object of a category from a seeded [`Rng`];
+//! [`generate_valid`] redraws until [`validity::check`] passes.
+//!
+//! Conventions (data.md §C.5, ARCHITECTURE.md "Canonical frame"): metres, +Z up, the front
+//! faces −X, floor at z = 0, roughly centred on x = y = 0, never rotated. Rest state q = 0 is
+//! closed; every range is `[0, upper]` with the sign carried by the axis, so "open" is
+//! positive: doors swing outward (towards −X), drawers slide along −X, bottom-hinged doors
+//! rotate about −Y, lids about +Y through their back bottom edge. A joint's `origin` is the
+//! child's attachment point (a door: a point on the hinge edge; a drawer: the front centre of
+//! the drawer when closed). Parts are unions of analytic primitives with tight boxes; labels
+//! come from PartNet-Mobility's vocabulary. Handles and knobs are sometimes parts of their own
+//! (fixed or revolute joints) and sometimes merged into their door or drawer, as in
+//! PartNet-Mobility.
+//!
+//! Determinism: everything is drawn from the given [`Rng`], so the same state gives the same
+//! object on every machine.
+//!
+//! Layout: `parts` holds the shared builders, `furniture`, `appliances` and `misc` the
+//! categories.
+
+mod appliances;
+mod furniture;
+mod misc;
+pub(crate) mod parts;
+
+use crate::data::categories::{SYNTH_CATEGORIES, canonical_name};
+use crate::data::rng::Rng;
+use crate::data::validity::{self, ValidityOptions};
+use crate::data::{DataError, LabelledObject};
+use crate::error::CoreError;
+
+/// Draw one object of `category` (any spelling of one of [`SYNTH_CATEGORIES`]).
+///
+/// The object is structurally valid (`validate()` passed) but not necessarily physically valid;
+/// use [`generate_valid`] for objects that pass [`validity::check`].
+pub fn generate(category: &str, rng: &mut Rng) -> Result<LabelledObject, DataError> {
+    let canonical = canonical_name(category)
+        .filter(|c| SYNTH_CATEGORIES.contains(c))
+        .ok_or_else(|| DataError::Option {
+            field: "category".into(),
+            limit: format!("one of {}", SYNTH_CATEGORIES.join(", ")),
+            value: format!("{category:?}"),
+        })?;
+    match canonical {
+        "StorageFurniture" => furniture::storage_furniture(rng),
+        "Table" => furniture::table(rng),
+        "Refrigerator" => appliances::refrigerator(rng),
+        "Microwave" => appliances::microwave(rng),
+        "Oven" => appliances::oven(rng),
+        "Dishwasher" => appliances::dishwasher(rng),
+        "WashingMachine" => appliances::washing_machine(rng),
+        "Laptop" => misc::laptop(rng),
+        "Box" => misc::box_(rng),
+        "Suitcase" => misc::suitcase(rng),
+        "TrashCan" => misc::trash_can(rng),
+        "Door" => misc::door(rng),
+        "Window" => misc::window(rng),
+        other => unreachable!("SYNTH_CATEGORIES lists {other} but generate does not"),
+    }
+}
+
+/// Draw objects of `category` until one passes [`validity::check`] with default options;
+/// returns it and the number of rejected draws. After `max_attempts` draws without success the
+/// error names the category, the number of attempts and the last violation.
+pub fn generate_valid(
+    category: &str,
+    rng: &mut Rng,
+    max_attempts: usize,
+) -> Result<(LabelledObject, usize), DataError> {
+    if max_attempts == 0 {
+        return Err(DataError::Option {
+            field: "max_attempts".into(),
+            limit: ">= 1".into(),
+            value: "0".into(),
+        });
+    }
+    let opts = ValidityOptions::default();
+    let mut last = None;
+    for attempt in 0..max_attempts {
+        let obj = generate(category, rng)?;
+        match validity::check(&obj.object, &opts) {
+            Ok(()) => return Ok((obj, attempt)),
+            Err(v) => last = Some(v),
+        }
+    }
+    let last = last.map(|v| v.to_string()).unwrap_or_default();
+    Err(DataError::Core(CoreError::Structure(format!(
+        "no physically valid {category} object in {max_attempts} attempts (last failure: {last})"
+    ))))
+}
+
+#[cfg(test)]
+mod tests;

@@ -73,7 +73,10 @@ pub fn synth(a: SynthArgs) -> anyhow::Result<()> {
     }
     println!("objects (rejected draws) per category:");
     for (c, v) in &report.per_category {
-        println!("  {c}: {v} ({})", report.rejected.get(c).copied().unwrap_or(0));
+        println!(
+            "  {c}: {v} ({})",
+            report.rejected.get(c).copied().unwrap_or(0)
+        );
     }
     println!("joints per type:");
     for (k, v) in &report.joint_histogram {
@@ -128,8 +131,12 @@ pub fn import(a: ImportArgs) -> anyhow::Result<()> {
 }
 
 fn write_cloud(points: Vec<[f32; 3]>, out: &Path) -> anyhow::Result<()> {
-    let format = Format::from_path(out)
-        .with_context(|| format!("invalid --out {}: extension must be .ply, .npy or .json", out.display()))?;
+    let format = Format::from_path(out).with_context(|| {
+        format!(
+            "invalid --out {}: extension must be .ply, .npy or .json",
+            out.display()
+        )
+    })?;
     PointCloud { points }.write(out, format)?;
     Ok(())
 }
@@ -172,7 +179,8 @@ pub fn scan(a: ScanArgs) -> anyhow::Result<()> {
 pub fn testset(a: TestsetArgs) -> anyhow::Result<()> {
     let index_path = a.data.join("dataset.json");
     let index: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(&index_path).with_context(|| format!("reading {}", index_path.display()))?,
+        &std::fs::read_to_string(&index_path)
+            .with_context(|| format!("reading {}", index_path.display()))?,
     )
     .with_context(|| format!("parsing {}", index_path.display()))?;
     let mut ids: Vec<String> = index["splits"][a.split.as_str()]
@@ -216,7 +224,10 @@ pub fn testset(a: TestsetArgs) -> anyhow::Result<()> {
     }
     pb.finish_and_clear();
     let out = serde_json::json!({ "data": a.data.display().to_string(), "split": a.split, "seed": a.seed, "clouds": entries });
-    std::fs::write(a.out.join("testset.json"), serde_json::to_string_pretty(&out)?)?;
+    std::fs::write(
+        a.out.join("testset.json"),
+        serde_json::to_string_pretty(&out)?,
+    )?;
     println!("{} scans -> {}", ids.len(), a.out.display());
     Ok(())
 }

@@ -302,7 +302,10 @@ impl ArticulatedObject {
                 parts.push(self.parts[k].clone());
                 continue;
             }
-            let (mut lo, mut hi) = (Vector3::repeat(f64::INFINITY), Vector3::repeat(f64::NEG_INFINITY));
+            let (mut lo, mut hi) = (
+                Vector3::repeat(f64::INFINITY),
+                Vector3::repeat(f64::NEG_INFINITY),
+            );
             for &m in &members {
                 let p = &self.parts[m];
                 lo = lo.inf(&(p.center - p.half_extents));

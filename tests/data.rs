@@ -40,7 +40,10 @@ fn tree_digest(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
             if p.is_dir() {
                 stack.push(p);
             } else {
-                out.insert(p.strip_prefix(dir).unwrap().to_path_buf(), std::fs::read(&p).unwrap());
+                out.insert(
+                    p.strip_prefix(dir).unwrap().to_path_buf(),
+                    std::fs::read(&p).unwrap(),
+                );
             }
         }
     }
@@ -59,7 +62,11 @@ fn synth_covers_categories_is_valid_and_deterministic() {
     let (da, db) = (tree_digest(a.path()), tree_digest(b.path()));
     assert_eq!(da.keys().collect::<Vec<_>>(), db.keys().collect::<Vec<_>>());
     for (k, v) in &da {
-        assert!(db[k] == *v, "{} differs between two runs with the same seed", k.display());
+        assert!(
+            db[k] == *v,
+            "{} differs between two runs with the same seed",
+            k.display()
+        );
     }
     // Every written object passes the validity checks.
     for i in 0..n {
@@ -80,14 +87,23 @@ fn synth_covers_categories_is_valid_and_deterministic() {
 fn import_round_trips_through_projection_and_sdf_signs_match_meshes() {
     let src = tempfile::tempdir().unwrap();
     let out = tempfile::tempdir().unwrap();
-    let n = 2 * SYNTH_CATEGORIES.len();
+    // Three objects per category, so every category has a train, val and test object.
+    let n = 3 * SYNTH_CATEGORIES.len();
     synth(src.path(), n, 5);
-    let opts = ImportOptions { seed: 1, uniform: 2000, near: 500, surface: 256 };
+    let opts = ImportOptions {
+        seed: 1,
+        uniform: 2000,
+        near: 500,
+        surface: 256,
+    };
     let report = import_dir(src.path(), out.path(), &opts, &|_, _| {}).unwrap();
     assert!(report.skipped.is_empty(), "{:?}", report.skipped);
     assert_eq!(report.entries.len(), n);
     for split in ["train", "val", "test"] {
-        assert!(report.entries.iter().any(|e| e.split == split), "empty {split} split");
+        assert!(
+            report.entries.iter().any(|e| e.split == split),
+            "empty {split} split"
+        );
     }
     let mut agree = 0usize;
     let mut total = 0usize;
@@ -100,31 +116,50 @@ fn import_round_trips_through_projection_and_sdf_signs_match_meshes() {
         let back = project(&g, &Default::default()).unwrap();
         let (imported, _) = load_object_meshes(&dir).unwrap();
         // The synthetic source, with fixed children merged, is what the importer must produce.
-        let source = physnap::io::object_json::read(&src.path().join(&e.id).join("physnap_shapes.json")).unwrap();
+        let source =
+            physnap::io::object_json::read(&src.path().join(&e.id).join("physnap_shapes.json"))
+                .unwrap();
         let (merged, _) = source.merge_fixed().unwrap();
         assert_eq!(imported.parts.len(), merged.parts.len(), "{}", e.id);
         assert_eq!(back.parts.len(), imported.parts.len(), "{}", e.id);
         for (a, b) in imported.parts.iter().zip(&merged.parts) {
-            assert!((a.center - b.center).norm() < 1e-9 && (a.half_extents - b.half_extents).norm() < 1e-9);
+            assert!(
+                (a.center - b.center).norm() < 1e-9
+                    && (a.half_extents - b.half_extents).norm() < 1e-9
+            );
         }
         for j in &imported.joints {
             let k = back
                 .joints
                 .iter()
-                .position(|x| (x.parent == j.parent && x.child == j.child) || (x.parent == j.child && x.child == j.parent))
+                .position(|x| {
+                    (x.parent == j.parent && x.child == j.child)
+                        || (x.parent == j.child && x.child == j.parent)
+                })
                 .unwrap_or_else(|| panic!("{}: joint {}-{} lost", e.id, j.parent, j.child));
             let x = &back.joints[k];
             assert_eq!(x.kind, j.kind, "{}", e.id);
             let sign = if x.parent == j.parent { 1.0 } else { -1.0 };
             assert!((x.axis * sign - j.axis).norm() < 1e-5, "{}: axis", e.id);
             for i in 0..2 {
-                assert!((x.revolute[i] - j.revolute[i]).abs() < 1e-5, "{}: revolute limits", e.id);
-                assert!((x.prismatic[i] - j.prismatic[i]).abs() < 1e-5, "{}: prismatic limits", e.id);
+                assert!(
+                    (x.revolute[i] - j.revolute[i]).abs() < 1e-5,
+                    "{}: revolute limits",
+                    e.id
+                );
+                assert!(
+                    (x.prismatic[i] - j.prismatic[i]).abs() < 1e-5,
+                    "{}: prismatic limits",
+                    e.id
+                );
             }
         }
         // The stored SDF samples' signs agree with the part meshes (winding-number inside test).
         for (k, part) in imported.parts.iter().enumerate() {
-            let mesh = physnap::mesh::obj::parse(&std::fs::read_to_string(dir.join(format!("part{k}.obj"))).unwrap()).unwrap();
+            let mesh = physnap::mesh::obj::parse(
+                &std::fs::read_to_string(dir.join(format!("part{k}.obj"))).unwrap(),
+            )
+            .unwrap();
             let bvh = MeshBvh::new(&mesh.positions, &mesh.triangles).unwrap();
             let (rows, cols, data) = npy::read(&dir.join(format!("part{k}_uniform.npy"))).unwrap();
             assert_eq!((rows, cols), (2000, 4));
@@ -132,12 +167,19 @@ fn import_round_trips_through_projection_and_sdf_signs_match_meshes() {
                 PartShape::Primitives(p) => p.as_slice(),
                 _ => &[],
             };
-            let analytic = AnalyticSdf { primitives: prims, half_extents: part.half_extents, kappa: part.kappa() };
+            let analytic = AnalyticSdf {
+                primitives: prims,
+                half_extents: part.half_extents,
+                kappa: part.kappa(),
+            };
             for row in data.chunks_exact(4) {
                 let p = [row[0], row[1], row[2]];
                 let mut exact = [0f32];
                 analytic.eval_batch(&[p], &mut exact);
-                assert!((exact[0] - row[3]).abs() < 1e-6, "stored SDF is the analytic SDF");
+                assert!(
+                    (exact[0] - row[3]).abs() < 1e-6,
+                    "stored SDF is the analytic SDF"
+                );
                 if exact[0].abs() < 1e-3 {
                     continue; // too close to the surface to call
                 }
@@ -147,7 +189,11 @@ fn import_round_trips_through_projection_and_sdf_signs_match_meshes() {
         }
     }
     let rate = agree as f64 / total as f64;
-    assert!(rate >= 0.995, "analytic SDF and mesh agree on sign at {:.4} of {total} points", rate);
+    assert!(
+        rate >= 0.995,
+        "analytic SDF and mesh agree on sign at {:.4} of {total} points",
+        rate
+    );
 }
 
 #[test]
@@ -161,13 +207,29 @@ fn scans_lie_on_visible_surfaces() {
         assert_eq!(s.points.len(), 1000);
         let all = merge_meshes(&obj.meshes);
         let bvh = MeshBvh::new(&all.positions, &all.triangles).unwrap();
-        let eye = [s.camera.eye.x as f32, s.camera.eye.y as f32, s.camera.eye.z as f32];
+        let eye = [
+            s.camera.eye.x as f32,
+            s.camera.eye.y as f32,
+            s.camera.eye.z as f32,
+        ];
         for p in &s.points {
-            let (_, d2, _) = bvh.closest_point(*p).unwrap();
-            assert!(d2.sqrt() < 1e-4, "point {p:?} is {} from the surface", d2.sqrt());
+            let (q, d2, tri) = bvh.closest_point(*p).unwrap();
+            if d2.sqrt() >= 1e-4 {
+                let dir: [f32; 3] = std::array::from_fn(|a| p[a] - eye[a]);
+                let h = bvh.ray_hit(eye, dir, 0.0, 2.0);
+                let t = all.triangles[tri as usize];
+                let v: Vec<_> = t.iter().map(|&i| all.positions[i as usize]).collect();
+                panic!(
+                    "tri verts {v:?} point {p:?} is {} from the surface (closest {q:?} tri {tri}); eye {eye:?}; re-hit {h:?}",
+                    d2.sqrt()
+                );
+            }
             // Visible: nothing between the camera and the point.
             let dir: [f32; 3] = std::array::from_fn(|a| p[a] - eye[a]);
-            assert!(!bvh.ray_occluded(eye, dir, 0.0, 1.0 - 1e-4), "point {p:?} is hidden");
+            assert!(
+                !bvh.ray_occluded(eye, dir, 0.0, 1.0 - 1e-4),
+                "point {p:?} is hidden"
+            );
         }
         // The framing rule held: elevation/azimuth within the protocol's ranges.
         assert!((30.0..=80.0).contains(&s.elevation) && (120.0..=240.0).contains(&s.azimuth));
@@ -178,7 +240,8 @@ fn scans_lie_on_visible_surfaces() {
 }
 
 fn edit_json(path: &Path, f: impl FnOnce(&mut serde_json::Value)) {
-    let mut v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let mut v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
     f(&mut v);
     std::fs::write(path, v.to_string()).unwrap();
 }
@@ -195,14 +258,21 @@ fn importer_handles_partnet_mobility_quirks() {
     }
     // 0: a null axis direction -> skipped with a reason.
     edit_json(&dir(0).join("mobility_v2.json"), |v| {
-        let e = v.as_array_mut().unwrap().iter_mut().find(|e| e["jointData"]["axis"].is_object()).unwrap();
+        let e = v
+            .as_array_mut()
+            .unwrap()
+            .iter_mut()
+            .find(|e| e["jointData"]["axis"].is_object())
+            .unwrap();
         e["jointData"]["axis"]["direction"] = serde_json::json!([null, 1, 0]);
     });
     // 1: a missing meta.json -> skipped.
     std::fs::remove_file(dir(1).join("meta.json")).unwrap();
     // 2: an OBJ listed in result.json is missing (its link keeps other meshes) -> imported
     // with a note.
-    let result: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir(2).join("result.json")).unwrap()).unwrap();
+    let result: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir(2).join("result.json")).unwrap())
+            .unwrap();
     let leaf = result[0]["children"]
         .as_array()
         .unwrap()
@@ -213,46 +283,98 @@ fn importer_handles_partnet_mobility_quirks() {
     std::fs::remove_file(dir(2).join(format!("textured_objs/{gone}.obj"))).unwrap();
     // 3: a second root (a link with ≥ 3 links in the object) -> merged into the first, noted.
     let links = |i: usize| -> usize {
-        let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir(i).join("mobility_v2.json")).unwrap()).unwrap();
+        let v: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(dir(i).join("mobility_v2.json")).unwrap(),
+        )
+        .unwrap();
         v.as_array().unwrap().len()
     };
-    let two_roots = (6..SYNTH_CATEGORIES.len()).find(|&i| links(i) >= 4).expect("an object with 4+ links");
+    let two_roots = (6..SYNTH_CATEGORIES.len())
+        .find(|&i| links(i) >= 4)
+        .expect("an object with 4+ links");
     edit_json(&dir(two_roots).join("mobility_v2.json"), |v| {
         let list = v.as_array_mut().unwrap();
         let parent_ids: Vec<i64> = list.iter().map(|e| e["parent"].as_i64().unwrap()).collect();
         // A leaf link (nobody's parent) becomes a second root.
         let k = (0..list.len())
-            .find(|&k| parent_ids[k] != -1 && !parent_ids.contains(&list[k]["id"].as_i64().unwrap()))
+            .find(|&k| {
+                parent_ids[k] != -1 && !parent_ids.contains(&list[k]["id"].as_i64().unwrap())
+            })
             .unwrap();
         list[k]["parent"] = (-1).into();
         list[k]["joint"] = "free".into();
     });
     // 4: a corrupted limit string -> skipped with a reason naming the field.
     edit_json(&dir(4).join("mobility_v2.json"), |v| {
-        let e = v.as_array_mut().unwrap().iter_mut().find(|e| e["jointData"]["limit"].is_object()).unwrap();
+        let e = v
+            .as_array_mut()
+            .unwrap()
+            .iter_mut()
+            .find(|e| e["jointData"]["limit"].is_object())
+            .unwrap();
         e["jointData"]["limit"]["b"] = "-z0.008".into();
     });
     // 5: a continuous hinge (noLimit) -> revolute [0, 2π].
     let mut hinge_id = None;
     edit_json(&dir(5).join("mobility_v2.json"), |v| {
-        if let Some(e) = v.as_array_mut().unwrap().iter_mut().find(|e| e["joint"] == "hinge") {
+        if let Some(e) = v
+            .as_array_mut()
+            .unwrap()
+            .iter_mut()
+            .find(|e| e["joint"] == "hinge")
+        {
             e["jointData"]["limit"]["noLimit"] = true.into();
             hinge_id = e["id"].as_i64();
         }
     });
 
-    let report = physnap::data::dataset::import_dir(src.path(), &tempfile::tempdir().unwrap().path().join("o"), &ImportOptions { uniform: 64, near: 64, surface: 64, ..Default::default() }, &|_, _| {}).unwrap();
+    let report = physnap::data::dataset::import_dir(
+        src.path(),
+        &tempfile::tempdir().unwrap().path().join("o"),
+        &ImportOptions {
+            uniform: 64,
+            near: 64,
+            surface: 64,
+            ..Default::default()
+        },
+        &|_, _| {},
+    )
+    .unwrap();
     let skipped: BTreeMap<_, _> = report.skipped.iter().cloned().collect();
-    assert!(skipped["000000"].contains("axis direction is null"), "{skipped:?}");
+    assert!(
+        skipped["000000"].contains("axis direction is null"),
+        "{skipped:?}"
+    );
     assert!(skipped["000001"].contains("meta.json"), "{skipped:?}");
     assert!(skipped["000004"].contains("limit.b"), "{skipped:?}");
-    assert!(report.notes.iter().any(|(id, n)| id == "000002" && n.contains("missing mesh")));
+    assert!(
+        report
+            .notes
+            .iter()
+            .any(|(id, n)| id == "000002" && n.contains("missing mesh"))
+    );
     let two_roots = format!("{two_roots:06}");
-    assert!(report.notes.iter().any(|(id, n)| *id == two_roots && n.contains("2 roots")), "{:?} {:?}", report.notes, report.skipped);
-    assert_eq!(report.entries.len() + report.skipped.len(), SYNTH_CATEGORIES.len());
+    assert!(
+        report
+            .notes
+            .iter()
+            .any(|(id, n)| *id == two_roots && n.contains("2 roots")),
+        "{:?} {:?}",
+        report.notes,
+        report.skipped
+    );
+    assert_eq!(
+        report.entries.len() + report.skipped.len(),
+        SYNTH_CATEGORIES.len()
+    );
     if hinge_id.is_some() {
         let o = read_object(&dir(5)).unwrap();
-        assert!(o.object.joints.iter().any(|j| j.revolute == [0.0, std::f64::consts::TAU]));
+        assert!(
+            o.object
+                .joints
+                .iter()
+                .any(|j| j.revolute == [0.0, std::f64::consts::TAU])
+        );
     }
 }
 
@@ -262,11 +384,24 @@ fn hinge_limits_are_read_in_degrees() {
     synth(src.path(), SYNTH_CATEGORIES.len(), 21);
     for i in 0..SYNTH_CATEGORIES.len() {
         let d = src.path().join(format!("{i:06}"));
-        let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("mobility_v2.json")).unwrap()).unwrap();
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(d.join("mobility_v2.json")).unwrap())
+                .unwrap();
         let o = read_object(&d).unwrap();
-        for e in v.as_array().unwrap().iter().filter(|e| e["joint"] == "hinge") {
+        for e in v
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|e| e["joint"] == "hinge")
+        {
             let b = e["jointData"]["limit"]["b"].as_f64().unwrap();
-            assert!(o.object.joints.iter().any(|j| (j.revolute[1] - b.to_radians()).abs() < 1e-9), "object {i}: {b} degrees");
+            assert!(
+                o.object
+                    .joints
+                    .iter()
+                    .any(|j| (j.revolute[1] - b.to_radians()).abs() < 1e-9),
+                "object {i}: {b} degrees"
+            );
         }
     }
 }

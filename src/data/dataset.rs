@@ -33,10 +33,10 @@ use nalgebra::Vector3;
 use rayon::prelude::*;
 use serde_json::{Value, json};
 
+use super::DataError;
 use super::categories::{CATEGORIES, category_index};
 use super::partnet::{ImportedObject, read_object};
 use super::rng::Rng;
-use super::DataError;
 use crate::graph::{FLAT_DIM, encode};
 use crate::io::npy;
 use crate::mesh::bvh::MeshBvh;
@@ -139,13 +139,11 @@ pub fn import_dir(
                 .file_name()
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_default();
-            let r = read_object(dir)
-                .map_err(|e| e.to_string())
-                .and_then(|o| {
-                    write_object_samples(&o, &out.join("objects").join(&o.id), opts)
-                        .map_err(|e| e.to_string())?;
-                    Ok(o)
-                });
+            let r = read_object(dir).map_err(|e| e.to_string()).and_then(|o| {
+                write_object_samples(&o, &out.join("objects").join(&o.id), opts)
+                    .map_err(|e| e.to_string())?;
+                Ok(o)
+            });
             let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             progress(n, total);
             (name, r)
@@ -188,10 +186,20 @@ fn assign_splits(objs: &[ImportedObject], seed: u64) -> Vec<&'static str> {
     cats.sort_unstable();
     cats.dedup();
     for cat in cats {
-        let mut members: Vec<usize> = (0..objs.len()).filter(|&i| objs[i].category == cat).collect();
-        members.sort_by_key(|&i| (fnv(&objs[i].id) ^ seed.wrapping_mul(0x9E37_79B9_7F4A_7C15), objs[i].id.clone()));
+        let mut members: Vec<usize> = (0..objs.len())
+            .filter(|&i| objs[i].category == cat)
+            .collect();
+        members.sort_by_key(|&i| {
+            (
+                fnv(&objs[i].id) ^ seed.wrapping_mul(0x9E37_79B9_7F4A_7C15),
+                objs[i].id.clone(),
+            )
+        });
         let n = members.len();
-        let (mut n_val, mut n_test) = ((n as f64 * 0.1).round() as usize, (n as f64 * 0.1).round() as usize);
+        let (mut n_val, mut n_test) = (
+            (n as f64 * 0.1).round() as usize,
+            (n as f64 * 0.1).round() as usize,
+        );
         if n >= 3 {
             n_val = n_val.max(1);
             n_test = n_test.max(1);
@@ -211,14 +219,19 @@ fn assign_splits(objs: &[ImportedObject], seed: u64) -> Vec<&'static str> {
 
 fn write_index(out: &Path, report: &ImportReport, opts: &ImportOptions) -> Result<(), DataError> {
     let split_ids = |s: &str| -> Vec<&str> {
-        report.entries.iter().filter(|e| e.split == s).map(|e| e.id.as_str()).collect()
+        report
+            .entries
+            .iter()
+            .filter(|e| e.split == s)
+            .map(|e| e.id.as_str())
+            .collect()
     };
     let index = json!({
         "format": FORMAT,
         "seed": opts.seed,
         "samples_per_part": { "uniform": opts.uniform, "near": opts.near, "surface": opts.surface },
         "normalisation": "q = (p - box_centre) / (2 * |half_extents|); sdf in normalised units, negative inside",
-        "categories": CATEGORIES,
+        "categories": CATEGORIES.to_vec(),
         "splits": { "train": split_ids("train"), "val": split_ids("val"), "test": split_ids("test") },
         "objects": report.entries.iter().map(|e| json!({
             "id": e.id, "category": e.category, "category_index": e.category_index,
@@ -228,8 +241,11 @@ fn write_index(out: &Path, report: &ImportReport, opts: &ImportOptions) -> Resul
         "notes": report.notes.iter().map(|(id, r)| json!({ "id": id, "note": r })).collect::<Vec<Value>>(),
     });
     let path = out.join("dataset.json");
-    std::fs::write(&path, serde_json::to_string_pretty(&index).unwrap_or_default())
-        .map_err(DataError::io(&path))
+    std::fs::write(
+        &path,
+        serde_json::to_string_pretty(&index).unwrap_or_default(),
+    )
+    .map_err(DataError::io(&path))
 }
 
 /// The SDF of part `k` in its normalised frame: analytic when available, else from the mesh.
@@ -250,10 +266,15 @@ impl PartSdf<'_> {
 }
 
 /// Write the records and samples of one imported object into `dir`.
-pub fn write_object_samples(o: &ImportedObject, dir: &Path, opts: &ImportOptions) -> Result<(), DataError> {
+pub fn write_object_samples(
+    o: &ImportedObject,
+    dir: &Path,
+    opts: &ImportOptions,
+) -> Result<(), DataError> {
     std::fs::create_dir_all(dir).map_err(DataError::io(dir))?;
     let obj_path = dir.join("object.json");
-    std::fs::write(&obj_path, crate::io::object_json::to_string(&o.object)).map_err(DataError::io(&obj_path))?;
+    std::fs::write(&obj_path, crate::io::object_json::to_string(&o.object))
+        .map_err(DataError::io(&obj_path))?;
     let slots: Vec<usize> = (0..o.object.parts.len()).collect();
     let graph = encode(&o.object, &slots)?.flatten();
     write_npy(&dir.join("graph.npy"), 1, FLAT_DIM, &graph)?;
@@ -267,14 +288,22 @@ pub fn write_object_samples(o: &ImportedObject, dir: &Path, opts: &ImportOptions
         });
         let path = dir.join(format!("part{k}.obj"));
         std::fs::write(&path, obj::to_text(&normalised)).map_err(DataError::io(&path))?;
-        let bvh = MeshBvh::new(&normalised.positions, &normalised.triangles)
-            .map_err(|d| DataError::Malformed { path: path.clone(), detail: d })?;
+        let bvh = MeshBvh::new(&normalised.positions, &normalised.triangles).map_err(|d| {
+            DataError::Malformed {
+                path: path.clone(),
+                detail: d,
+            }
+        })?;
         let prims: &[crate::shape::Primitive] = match &part.shape {
             PartShape::Primitives(p) => p,
             _ => &[],
         };
         let sdf = if o.analytic {
-            PartSdf::Analytic(AnalyticSdf { primitives: prims, half_extents: part.half_extents, kappa })
+            PartSdf::Analytic(AnalyticSdf {
+                primitives: prims,
+                half_extents: part.half_extents,
+                kappa,
+            })
         } else {
             PartSdf::Mesh(&bvh)
         };
@@ -297,11 +326,30 @@ pub fn write_object_samples(o: &ImportedObject, dir: &Path, opts: &ImportOptions
             .collect();
         for (name, pts) in [("uniform", &uniform), ("near", &near)] {
             let d = sdf.eval(pts);
-            let rows: Vec<f32> = pts.iter().zip(&d).flat_map(|(p, v)| [p[0], p[1], p[2], *v]).collect();
-            write_npy(&dir.join(format!("part{k}_{name}.npy")), pts.len(), 4, &rows)?;
+            let rows: Vec<f32> = pts
+                .iter()
+                .zip(&d)
+                .flat_map(|(p, v)| [p[0], p[1], p[2], *v])
+                .collect();
+            write_npy(
+                &dir.join(format!("part{k}_{name}.npy")),
+                pts.len(),
+                4,
+                &rows,
+            )?;
         }
-        let surf: Vec<f32> = surface.iter().take(opts.surface).flatten().copied().collect();
-        write_npy(&dir.join(format!("part{k}_surface.npy")), surf.len() / 3, 3, &surf)?;
+        let surf: Vec<f32> = surface
+            .iter()
+            .take(opts.surface)
+            .flatten()
+            .copied()
+            .collect();
+        write_npy(
+            &dir.join(format!("part{k}_surface.npy")),
+            surf.len() / 3,
+            3,
+            &surf,
+        )?;
     }
     Ok(())
 }
@@ -325,7 +373,12 @@ fn outer_surface(bvh: &MeshBvh, sdf: &PartSdf<'_>, n: usize, rng: &mut Rng) -> V
             PartSdf::Analytic(_) => sdf.eval(&cand).iter().map(|d| *d > -1e-5).collect(),
             PartSdf::Mesh(_) => vec![true; cand.len()],
         };
-        out.extend(cand.into_iter().zip(keep).filter(|(_, k)| *k).map(|(p, _)| p));
+        out.extend(
+            cand.into_iter()
+                .zip(keep)
+                .filter(|(_, k)| *k)
+                .map(|(p, _)| p),
+        );
         if out.len() >= n {
             out.truncate(n);
             break;
@@ -335,18 +388,27 @@ fn outer_surface(bvh: &MeshBvh, sdf: &PartSdf<'_>, n: usize, rng: &mut Rng) -> V
 }
 
 /// Meshes of an imported dataset object in the object frame (from its normalised part OBJs).
-pub fn load_object_meshes(obj_dir: &Path) -> Result<(crate::object::ArticulatedObject, Vec<TriMesh>), DataError> {
-    let object = crate::io::object_json::read(&obj_dir.join("object.json")).map_err(|e| DataError::Malformed {
-        path: obj_dir.join("object.json"),
-        detail: e.to_string(),
+pub fn load_object_meshes(
+    obj_dir: &Path,
+) -> Result<(crate::object::ArticulatedObject, Vec<TriMesh>), DataError> {
+    let object = crate::io::object_json::read(&obj_dir.join("object.json")).map_err(|e| {
+        DataError::Malformed {
+            path: obj_dir.join("object.json"),
+            detail: e.to_string(),
+        }
     })?;
     let mut meshes = Vec::with_capacity(object.parts.len());
     for (k, part) in object.parts.iter().enumerate() {
         let path = obj_dir.join(format!("part{k}.obj"));
         let text = std::fs::read_to_string(&path).map_err(DataError::io(&path))?;
-        let m = obj::parse(&text).map_err(|d| DataError::Malformed { path: path.clone(), detail: d })?;
+        let m = obj::parse(&text).map_err(|d| DataError::Malformed {
+            path: path.clone(),
+            detail: d,
+        })?;
         let (kappa, t) = (part.kappa() as f32, part.center.map(|v| v as f32));
-        meshes.push(m.map_positions(|q| [t.x + kappa * q[0], t.y + kappa * q[1], t.z + kappa * q[2]]));
+        meshes.push(
+            m.map_positions(|q| [t.x + kappa * q[0], t.y + kappa * q[1], t.z + kappa * q[2]]),
+        );
     }
     Ok((object, meshes))
 }

@@ -50,6 +50,14 @@ pub struct SynthReport {
     pub failed: Vec<(usize, String)>,
 }
 
+/// One written object's statistics.
+struct Written {
+    category: String,
+    rejected: usize,
+    parts: usize,
+    kinds: Vec<&'static str>,
+}
+
 /// Generate and write `opts.objects` objects into `out` (one folder per object, `000000`, …),
 /// plus `synth.json` with the report.
 pub fn synthesize(
@@ -66,7 +74,7 @@ pub fn synthesize(
     }
     std::fs::create_dir_all(out).map_err(DataError::io(out))?;
     let done = std::sync::atomic::AtomicUsize::new(0);
-    let results: Vec<Result<(String, usize, usize, Vec<&'static str>), (usize, String)>> = (0..opts.objects)
+    let results: Vec<Result<Written, (usize, String)>> = (0..opts.objects)
         .into_par_iter()
         .map(|i| {
             let cat = &opts.categories[i % opts.categories.len()];
@@ -77,7 +85,12 @@ pub fn synthesize(
                     let id = format!("{i:06}");
                     partnet::write_object(&obj, &id, out).map_err(|e| (i, e.to_string()))?;
                     let kinds = obj.object.joints.iter().map(|j| j.kind.as_str()).collect();
-                    Ok((cat.clone(), rejected, obj.object.parts.len(), kinds))
+                    Ok(Written {
+                        category: cat.clone(),
+                        rejected,
+                        parts: obj.object.parts.len(),
+                        kinds,
+                    })
                 });
             let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             progress(n, opts.objects);
@@ -87,12 +100,12 @@ pub fn synthesize(
     let mut report = SynthReport::default();
     for r in results {
         match r {
-            Ok((cat, rejected, parts, kinds)) => {
+            Ok(w) => {
                 report.written += 1;
-                *report.per_category.entry(cat.clone()).or_default() += 1;
-                *report.rejected.entry(cat).or_default() += rejected;
-                *report.part_histogram.entry(parts).or_default() += 1;
-                for k in kinds {
+                *report.per_category.entry(w.category.clone()).or_default() += 1;
+                *report.rejected.entry(w.category).or_default() += w.rejected;
+                *report.part_histogram.entry(w.parts).or_default() += 1;
+                for k in w.kinds {
                     *report.joint_histogram.entry(k.to_string()).or_default() += 1;
                 }
             }
@@ -112,7 +125,10 @@ pub fn synthesize(
         "failed": report.failed.iter().map(|(i, r)| json!({"index": i, "reason": r})).collect::<Vec<_>>(),
     });
     let path = out.join("synth.json");
-    std::fs::write(&path, serde_json::to_string_pretty(&summary).unwrap_or_default())
-        .map_err(DataError::io(&path))?;
+    std::fs::write(
+        &path,
+        serde_json::to_string_pretty(&summary).unwrap_or_default(),
+    )
+    .map_err(DataError::io(&path))?;
     Ok(report)
 }

@@ -81,7 +81,6 @@ pub fn write_object(obj: &LabelledObject, id: &str, dir: &Path) -> Result<PathBu
     let mut next_obj = 0usize;
     let mut result_children = Vec::new();
     let mut part_node_id = Vec::with_capacity(o.parts.len());
-    let mut next_node = 1usize;
     for (p, part) in o.parts.iter().enumerate() {
         let prims: Vec<Primitive> = match &part.shape {
             PartShape::Primitives(list) => list.clone(),
@@ -92,7 +91,10 @@ pub fn write_object(obj: &LabelledObject, id: &str, dir: &Path) -> Result<PathBu
             PartShape::Latent(_) => {
                 return Err(DataError::Malformed {
                     path: root_dir.clone(),
-                    detail: format!("part {:?} has a latent shape; only analytic parts can be written", part.name),
+                    detail: format!(
+                        "part {:?} has a latent shape; only analytic parts can be written",
+                        part.name
+                    ),
                 });
             }
         };
@@ -110,8 +112,8 @@ pub fn write_object(obj: &LabelledObject, id: &str, dir: &Path) -> Result<PathBu
             std::fs::write(&path, obj::to_text(&raw)).map_err(io(&path))?;
             leaves.push(name);
         }
-        let node_id = next_node;
-        next_node += 1;
+        // result.json node ids: 0 is the object, part p is node p + 1.
+        let node_id = p + 1;
         part_node_id.push(node_id);
         result_children.push(json!({
             "id": node_id, "text": obj.labels[p], "name": obj.labels[p], "objs": leaves,
@@ -122,7 +124,7 @@ pub fn write_object(obj: &LabelledObject, id: &str, dir: &Path) -> Result<PathBu
     // mobility_v2.json: entry id = part index (link_<p>).
     let mut entries = Vec::new();
     let mut semantics = String::new();
-    for p in 0..o.parts.len() {
+    for (p, node_id) in part_node_id.iter().enumerate() {
         let joint = o.parent_joint(p).map(|k| &o.joints[k]);
         let kind = joint.map(|j| j.kind).unwrap_or(JointKind::Fixed);
         let word = joint_word(kind, p == root);
@@ -136,7 +138,9 @@ pub fn write_object(obj: &LabelledObject, id: &str, dir: &Path) -> Result<PathBu
                     JointKind::Revolute => json!({
                         "a": j.revolute[0].to_degrees(), "b": j.revolute[1].to_degrees(), "noLimit": false,
                     }),
-                    JointKind::Prismatic => json!({ "a": j.prismatic[0], "b": j.prismatic[1], "noLimit": false }),
+                    JointKind::Prismatic => {
+                        json!({ "a": j.prismatic[0], "b": j.prismatic[1], "noLimit": false })
+                    }
                     _ => json!({
                         "a": j.prismatic[0], "b": j.prismatic[1], "noLimit": false, "rotates": true,
                         "noRotationLimit": false,
@@ -153,7 +157,7 @@ pub fn write_object(obj: &LabelledObject, id: &str, dir: &Path) -> Result<PathBu
             "parent": joint.map(|j| j.parent as i64).unwrap_or(-1),
             "joint": word,
             "name": obj.labels[p],
-            "parts": [{ "id": part_node_id[p], "name": obj.labels[p], "children": [] }],
+            "parts": [{ "id": node_id, "name": obj.labels[p], "children": [] }],
             "jointData": joint_data,
         }));
         let _ = writeln!(semantics, "link_{p} {word} {}", obj.labels[p]);
@@ -189,7 +193,11 @@ fn mobility_urdf(obj: &LabelledObject, result_children: &[Value]) -> String {
             .unwrap_or([0.0; 3])
     };
     let mut x = String::new();
-    let _ = writeln!(x, "<?xml version=\"1.0\" ?>\n<robot name=\"partnet_{}\">", o.name);
+    let _ = writeln!(
+        x,
+        "<?xml version=\"1.0\" ?>\n<robot name=\"partnet_{}\">",
+        o.name
+    );
     let _ = writeln!(x, "\t<link name=\"base\"/>");
     for (p, leaves) in result_children.iter().enumerate() {
         let f = frame(p);
@@ -224,7 +232,13 @@ fn mobility_urdf(obj: &LabelledObject, result_children: &[Value]) -> String {
                 let _ = writeln!(
                     x,
                     "\t<joint name=\"joint_{p}\" type=\"{ty}\">\n\t\t<origin xyz=\"{} {} {}\"/>\n\t\t<axis xyz=\"{} {} {}\"/>\n\t\t<child link=\"link_{p}\"/>\n\t\t<parent link=\"link_{}\"/>",
-                    f[0] - pf[0], f[1] - pf[1], f[2] - pf[2], d[0], d[1], d[2], j.parent
+                    f[0] - pf[0],
+                    f[1] - pf[1],
+                    f[2] - pf[2],
+                    d[0],
+                    d[1],
+                    d[2],
+                    j.parent
                 );
                 if let Some(r) = limit {
                     let _ = writeln!(x, "\t\t<limit lower=\"{}\" upper=\"{}\"/>", r[0], r[1]);
@@ -330,7 +344,12 @@ pub fn read_object(dir: &Path) -> Result<ImportedObject, DataError> {
         .as_str()
         .ok_or_else(|| malformed(&dir.join("meta.json"), "no model_cat"))?;
     let category = super::categories::canonical_name(category)
-        .ok_or_else(|| malformed(&dir.join("meta.json"), format!("unknown model_cat {category:?}")))?
+        .ok_or_else(|| {
+            malformed(
+                &dir.join("meta.json"),
+                format!("unknown model_cat {category:?}"),
+            )
+        })?
         .to_string();
     let mob_path = dir.join("mobility_v2.json");
     let mob = read_json(&mob_path)?;
@@ -340,7 +359,9 @@ pub fn read_object(dir: &Path) -> Result<ImportedObject, DataError> {
     let mut result_index = HashMap::new();
     let result_path = dir.join("result.json");
     match read_json(&result_path)? {
-        Value::Array(roots) => roots.iter().for_each(|r| index_result(r, &mut result_index)),
+        Value::Array(roots) => roots
+            .iter()
+            .for_each(|r| index_result(r, &mut result_index)),
         other => index_result(&other, &mut result_index),
     }
     let mut notes = Vec::new();
@@ -359,14 +380,18 @@ pub fn read_object(dir: &Path) -> Result<ImportedObject, DataError> {
     let mut links = Vec::with_capacity(entries.len());
     for (k, e) in entries.iter().enumerate() {
         let at = |what: &str| format!("links[{k}] (id {}): {what}", e["id"]);
-        let lid = e["id"].as_i64().ok_or_else(|| malformed(&mob_path, at("no integer id")))?;
+        let lid = e["id"]
+            .as_i64()
+            .ok_or_else(|| malformed(&mob_path, at("no integer id")))?;
         let parent = e["parent"].as_i64().unwrap_or(-1);
         let word = e["joint"].as_str().unwrap_or("static");
         let limit = &e["jointData"]["limit"];
         let (mut kind, mut revolute, mut prismatic) = (JointKind::Fixed, [0.0; 2], [0.0; 2]);
         let ab = || -> Result<[f64; 2], DataError> {
-            let a = number(&limit["a"]).ok_or_else(|| malformed(&mob_path, at("limit.a missing or not a number")))?;
-            let b = number(&limit["b"]).ok_or_else(|| malformed(&mob_path, at("limit.b missing or not a number")))?;
+            let a = number(&limit["a"])
+                .ok_or_else(|| malformed(&mob_path, at("limit.a missing or not a number")))?;
+            let b = number(&limit["b"])
+                .ok_or_else(|| malformed(&mob_path, at("limit.b missing or not a number")))?;
             Ok([a.min(b), a.max(b)])
         };
         match word {
@@ -397,10 +422,18 @@ pub fn read_object(dir: &Path) -> Result<ImportedObject, DataError> {
         }
         let axis = if kind != JointKind::Fixed {
             let ax = &e["jointData"]["axis"];
-            let dir_raw = vec3(&ax["direction"])
-                .ok_or_else(|| malformed(&mob_path, at("joint axis direction is null or not 3 numbers (bad data)")))?;
-            let origin_raw = vec3(&ax["origin"])
-                .ok_or_else(|| malformed(&mob_path, at("joint axis origin is null or not 3 numbers (bad data)")))?;
+            let dir_raw = vec3(&ax["direction"]).ok_or_else(|| {
+                malformed(
+                    &mob_path,
+                    at("joint axis direction is null or not 3 numbers (bad data)"),
+                )
+            })?;
+            let origin_raw = vec3(&ax["origin"]).ok_or_else(|| {
+                malformed(
+                    &mob_path,
+                    at("joint axis origin is null or not 3 numbers (bad data)"),
+                )
+            })?;
             let d = raw_to_world(dir_raw);
             if d.norm() < 1e-9 {
                 return Err(malformed(&mob_path, at("joint axis direction is zero")));
@@ -434,8 +467,11 @@ pub fn read_object(dir: &Path) -> Result<ImportedObject, DataError> {
                 let w = raw_to_world([v[0] as f64, v[1] as f64, v[2] as f64]);
                 [w.x as f32, w.y as f32, w.z as f32]
             }));
-            mesh.triangles
-                .extend(m.triangles.iter().map(|t| [t[0] + base, t[1] + base, t[2] + base]));
+            mesh.triangles.extend(
+                m.triangles
+                    .iter()
+                    .map(|t| [t[0] + base, t[1] + base, t[2] + base]),
+            );
         }
         links.push(Link {
             id: lid,
@@ -457,10 +493,17 @@ pub fn read_object(dir: &Path) -> Result<ImportedObject, DataError> {
         .filter(|&k| links[k].parent < 0 || pos(links[k].parent).is_none())
         .collect();
     let Some(&root) = roots.first() else {
-        return Err(malformed(&mob_path, "no root link (every link has a parent: a cycle)"));
+        return Err(malformed(
+            &mob_path,
+            "no root link (every link has a parent: a cycle)",
+        ));
     };
     if roots.len() > 1 {
-        notes.push(format!("{} roots; extra roots merged into link id {}", roots.len(), links[root].id));
+        notes.push(format!(
+            "{} roots; extra roots merged into link id {}",
+            roots.len(),
+            links[root].id
+        ));
     }
     let parent_of = |k: usize| -> Option<usize> {
         if k == root {
@@ -474,9 +517,10 @@ pub fn read_object(dir: &Path) -> Result<ImportedObject, DataError> {
 
     // Build the unmerged object: parts = links with non-empty meshes (boxes = mesh AABB).
     let analytic_obj = match std::fs::read_to_string(dir.join("physnap_shapes.json")) {
-        Ok(text) => Some(crate::io::object_json::from_str(&text).map_err(|e| {
-            malformed(&dir.join("physnap_shapes.json"), e.to_string())
-        })?),
+        Ok(text) => Some(
+            crate::io::object_json::from_str(&text)
+                .map_err(|e| malformed(&dir.join("physnap_shapes.json"), e.to_string()))?,
+        ),
         Err(_) => None,
     };
     let analytic = analytic_obj
@@ -485,12 +529,21 @@ pub fn read_object(dir: &Path) -> Result<ImportedObject, DataError> {
     let mut parts = Vec::with_capacity(links.len());
     for (k, l) in links.iter().enumerate() {
         let part = if analytic {
-            let mut p = analytic_obj.as_ref().map(|a| a.parts[k].clone()).ok_or_else(|| malformed(dir, "shapes"))?;
+            let mut p = analytic_obj
+                .as_ref()
+                .map(|a| a.parts[k].clone())
+                .ok_or_else(|| malformed(dir, "shapes"))?;
             p.name = format!("link_{}", l.id);
             p
         } else {
             let Some((lo, hi)) = l.mesh.bounds() else {
-                return Err(malformed(dir, format!("link id {} has no geometry (all meshes missing or empty)", l.id)));
+                return Err(malformed(
+                    dir,
+                    format!(
+                        "link id {} has no geometry (all meshes missing or empty)",
+                        l.id
+                    ),
+                ));
             };
             let lo = Vector3::new(lo[0] as f64, lo[1] as f64, lo[2] as f64);
             let hi = Vector3::new(hi[0] as f64, hi[1] as f64, hi[2] as f64);
@@ -507,7 +560,9 @@ pub fn read_object(dir: &Path) -> Result<ImportedObject, DataError> {
     for k in 0..links.len() {
         let Some(p) = parent_of(k) else { continue };
         let l = &links[k];
-        let (axis, origin) = l.axis.unwrap_or((Vector3::z(), Point3::from(parts[k].center)));
+        let (axis, origin) = l
+            .axis
+            .unwrap_or((Vector3::z(), Point3::from(parts[k].center)));
         joints.push(Joint {
             parent: p,
             child: k,
@@ -540,8 +595,12 @@ pub fn read_object(dir: &Path) -> Result<ImportedObject, DataError> {
         let m = &mut meshes[map[k]];
         let base = m.positions.len() as u32;
         m.positions.extend_from_slice(&l.mesh.positions);
-        m.triangles
-            .extend(l.mesh.triangles.iter().map(|t| [t[0] + base, t[1] + base, t[2] + base]));
+        m.triangles.extend(
+            l.mesh
+                .triangles
+                .iter()
+                .map(|t| [t[0] + base, t[1] + base, t[2] + base]),
+        );
         if labels[map[k]].is_empty() || parent_of(k).is_none_or(|p| map[p] != map[k]) {
             labels[map[k]] = l.label.clone();
         }
@@ -587,7 +646,11 @@ fn merge_fixed_loose(obj: &ArticulatedObject) -> Result<(ArticulatedObject, Vec<
     if obj.parts.len() <= MAX_PARTS {
         return obj.merge_fixed().map_err(|e| e.to_string());
     }
-    let movable = obj.joints.iter().filter(|j| j.kind != JointKind::Fixed).count();
+    let movable = obj
+        .joints
+        .iter()
+        .filter(|j| j.kind != JointKind::Fixed)
+        .count();
     Err(format!(
         "{} links, {} nodes after merging fixed joints (must be between 2 and {MAX_PARTS})",
         obj.parts.len(),

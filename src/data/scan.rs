@@ -132,8 +132,11 @@ pub fn merge_meshes(meshes: &[TriMesh]) -> TriMesh {
     for m in meshes {
         let base = all.positions.len() as u32;
         all.positions.extend_from_slice(&m.positions);
-        all.triangles
-            .extend(m.triangles.iter().map(|t| [t[0] + base, t[1] + base, t[2] + base]));
+        all.triangles.extend(
+            m.triangles
+                .iter()
+                .map(|t| [t[0] + base, t[1] + base, t[2] + base]),
+        );
     }
     all
 }
@@ -175,8 +178,14 @@ pub fn scan(meshes: &[TriMesh], rng: &mut Rng, opts: &ScanOptions) -> Result<Sca
         let az = rng.range(opts.azimuth.0, opts.azimuth.1);
         let dist = rng.range(opts.distance.0, opts.distance.1);
         let (e, a) = (el.to_radians(), az.to_radians());
-        let eye = target + radius * dist * Vector3::new(e.cos() * a.cos(), e.cos() * a.sin(), e.sin());
-        let camera = Camera { eye, target, fov_deg: opts.fov_deg, image: opts.image };
+        let eye =
+            target + radius * dist * Vector3::new(e.cos() * a.cos(), e.cos() * a.sin(), e.sin());
+        let camera = Camera {
+            eye,
+            target,
+            fov_deg: opts.fov_deg,
+            image: opts.image,
+        };
         // Framing: every vertex in front of the camera and inside the image, and the object
         // spanning at least min_span of the image both ways.
         let mut framed = true;
@@ -205,7 +214,8 @@ pub fn scan(meshes: &[TriMesh], rng: &mut Rng, opts: &ScanOptions) -> Result<Sca
             .filter(|&k| {
                 let (u, v) = ((k % opts.image) as f64 + 0.5, (k / opts.image) as f64 + 0.5);
                 let d = camera.ray(u, v);
-                bvh.ray_hit(eye32, [d.x as f32, d.y as f32, d.z as f32], 0.0, far).is_some()
+                bvh.ray_hit(eye32, [d.x as f32, d.y as f32, d.z as f32], 0.0, far)
+                    .is_some()
             })
             .collect();
         if mask.is_empty() {
@@ -252,7 +262,10 @@ pub fn scan(meshes: &[TriMesh], rng: &mut Rng, opts: &ScanOptions) -> Result<Sca
     }
     Err(DataError::Option {
         field: "scan".into(),
-        limit: format!("a well-framed camera pose within {} attempts", opts.max_attempts),
+        limit: format!(
+            "a well-framed camera pose within {} attempts",
+            opts.max_attempts
+        ),
         value: "none found (object too thin or too large for the field of view?)".into(),
     })
 }

@@ -61,7 +61,10 @@ pub fn from_bytes(bytes: &[u8]) -> Result<(usize, usize, Vec<f32>), String> {
         .split(',')
         .map(str::trim)
         .filter(|s| !s.is_empty())
-        .map(|s| s.parse::<usize>().map_err(|_| format!("bad NPY shape ({shape})")))
+        .map(|s| {
+            s.parse::<usize>()
+                .map_err(|_| format!("bad NPY shape ({shape})"))
+        })
         .collect::<Result<_, _>>()?;
     let (rows, cols) = match dims[..] {
         [r, c] => (r, c),
@@ -74,7 +77,10 @@ pub fn from_bytes(bytes: &[u8]) -> Result<(usize, usize, Vec<f32>), String> {
         .and_then(|n| n.checked_mul(4))
         .ok_or("NPY shape overflows")?;
     if data.len() < need {
-        return Err(format!("truncated NPY data: need {need} bytes, got {}", data.len()));
+        return Err(format!(
+            "truncated NPY data: need {need} bytes, got {}",
+            data.len()
+        ));
     }
     let values = data[..need]
         .chunks_exact(4)
@@ -113,7 +119,11 @@ mod tests {
         let hlen = u16::from_le_bytes([b[8], b[9]]) as usize;
         assert_eq!((10 + hlen) % 64, 0);
         assert_eq!(super::from_bytes(&b).unwrap(), (3, 4, data));
-        assert!(super::from_bytes(&b[..b.len() - 1]).unwrap_err().contains("truncated"));
+        assert!(
+            super::from_bytes(&b[..b.len() - 1])
+                .unwrap_err()
+                .contains("truncated")
+        );
         assert!(super::from_bytes(b"hello world").is_err());
     }
 }

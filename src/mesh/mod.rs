@@ -10,6 +10,7 @@
 //! Grid evaluation is batched per z-slab through [`Sdf::eval_batch`] and runs in parallel on
 //! the current rayon pool, so a neural decoder sees thousands of points per call.
 
+pub mod bvh;
 pub mod marching_cubes;
 pub mod obj;
 pub mod primitives;

@@ -17,10 +17,12 @@ pub fn parse(text: &str) -> Result<TriMesh, String> {
             Some("v") => {
                 let mut p = [0f32; 3];
                 for (a, v) in p.iter_mut().enumerate() {
-                    let tok = it.next().ok_or_else(|| format!("line {}: vertex has fewer than 3 coordinates", ln + 1))?;
-                    *v = tok
-                        .parse::<f32>()
-                        .map_err(|_| format!("line {}: coordinate {a} '{tok}' is not a number", ln + 1))?;
+                    let tok = it.next().ok_or_else(|| {
+                        format!("line {}: vertex has fewer than 3 coordinates", ln + 1)
+                    })?;
+                    *v = tok.parse::<f32>().map_err(|_| {
+                        format!("line {}: coordinate {a} '{tok}' is not a number", ln + 1)
+                    })?;
                     if !v.is_finite() {
                         return Err(format!("line {}: coordinate {a} is not finite", ln + 1));
                     }
@@ -32,9 +34,9 @@ pub fn parse(text: &str) -> Result<TriMesh, String> {
                 let idx: Vec<u32> = it
                     .map(|tok| {
                         let first = tok.split('/').next().unwrap_or("");
-                        let i: i64 = first
-                            .parse()
-                            .map_err(|_| format!("line {}: face index '{tok}' is not an integer", ln + 1))?;
+                        let i: i64 = first.parse().map_err(|_| {
+                            format!("line {}: face index '{tok}' is not an integer", ln + 1)
+                        })?;
                         let k = if i < 0 { n + i } else { i - 1 };
                         if k < 0 || k >= n {
                             return Err(format!(
@@ -79,6 +81,10 @@ mod tests {
         assert_eq!(m.triangles, vec![[0, 1, 2], [0, 2, 3], [0, 1, 2]]);
         assert_eq!(super::parse(&super::to_text(&m)).unwrap(), m);
         assert!(super::parse("v 0 0\n").unwrap_err().contains("line 1"));
-        assert!(super::parse("v 0 0 0\nf 1 2 3\n").unwrap_err().contains("out of range"));
+        assert!(
+            super::parse("v 0 0 0\nf 1 2 3\n")
+                .unwrap_err()
+                .contains("out of range")
+        );
     }
 }

@@ -12,6 +12,7 @@ pub mod graph;
 pub mod io;
 pub mod kinematics;
 pub mod mesh;
+pub mod model;
 pub mod object;
 pub mod pointcloud;
 pub mod shape;

@@ -8,6 +8,8 @@
 
 use burn::tensor::Device;
 
+pub mod weights;
+
 /// The inference device: Flex (pure-Rust CPU).
 pub fn cpu() -> Device {
     Device::flex()
@@ -54,7 +56,7 @@ mod tests {
         let y = (x.clone() * x.clone()).sum();
         let grads = y.backward();
         let g = x.grad(&grads).expect("gradient");
-        let v: Vec<f32> = g.into_data().to_vec().expect("f32 data");
+        let v: Vec<f32> = g.into_data().try_to_vec::<f32>().expect("f32 data");
         assert_eq!(v, vec![2.0, 4.0, 6.0]);
     }
 }

@@ -22,6 +22,9 @@ pub enum FormatError {
     /// The document parsed, but a value breaks a rule of the object model.
     #[error(transparent)]
     Invalid(#[from] crate::error::CoreError),
+    /// A weights file is missing, corrupted or does not fit its config.
+    #[error(transparent)]
+    Weights(#[from] crate::model::weights::WeightsError),
     /// Reading or writing the file failed.
     #[error("{path}: {source}")]
     Io {
@@ -38,6 +41,7 @@ impl FormatError {
         match self {
             FormatError::Malformed { .. } => "malformed",
             FormatError::Invalid(e) => e.error_type(),
+            FormatError::Weights(_) => "weights",
             FormatError::Io { .. } => "io",
         }
     }

@@ -1,0 +1,264 @@
+//! `weights/manifest.json`: what the shipped weights are and how they were made.
+//!
+//! Why it exists: a weights directory must be self-describing and verifiable. The manifest
+//! holds each model's architecture config, file name and sha256, the feature scales the
+//! denoiser was trained with, the category list, and (verbatim JSON) how the data were made,
+//! how training went and the evaluation metrics. [`load_models`] refuses files whose sha256
+//! differs and configs that do not fit the tensors.
+//!
+//! ```json
+//! { "format": "physnap.weights/v1",
+//!   "shape_prior": { "file": "shape_prior.safetensors", "sha256": "…", "config": { "latent": 128, … } },
+//!   "denoiser":    { "file": "denoiser.safetensors",    "sha256": "…", "config": { "width": 160, … } },
+//!   "feature_scales": { "node": [135 floats], "edge": [13 floats] },
+//!   "categories": ["Door", "Window", …],
+//!   "data": {…}, "training": {…}, "metrics": {…} }
+//! ```
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+
+use super::FormatError;
+use crate::graph::FeatureScales;
+use crate::model::denoiser::{Denoiser, DenoiserConfig};
+use crate::model::shape_prior::{ShapePrior, ShapePriorConfig};
+use crate::model::weights;
+
+/// Format tag.
+pub const FORMAT: &str = "physnap.weights/v1";
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+struct ShapeConfigDoc {
+    latent: usize,
+    decoder_hidden: usize,
+    decoder_blocks: usize,
+    encoder_hidden: usize,
+    encoder_blocks: usize,
+    pe_freqs: usize,
+}
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+struct DenoiserConfigDoc {
+    width: usize,
+    layers: usize,
+    head_channels: usize,
+    t_pe_dim: usize,
+    slot_pe_dim: usize,
+    node_head_hidden: Vec<usize>,
+    edge_head_hidden: Vec<usize>,
+    categories: usize,
+    legacy_edge_embedding: bool,
+}
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+struct EntryDoc<C> {
+    file: String,
+    sha256: String,
+    config: C,
+}
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+struct ScalesDoc {
+    node: Vec<f32>,
+    edge: Vec<f32>,
+}
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+struct ManifestDoc {
+    format: String,
+    shape_prior: EntryDoc<ShapeConfigDoc>,
+    denoiser: EntryDoc<DenoiserConfigDoc>,
+    feature_scales: ScalesDoc,
+    categories: Vec<String>,
+    #[serde(default)]
+    data: Value,
+    #[serde(default)]
+    training: Value,
+    #[serde(default)]
+    metrics: Value,
+}
+
+/// A weights file entry.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Entry<C> {
+    /// File name relative to the manifest.
+    pub file: String,
+    /// Hex sha256 of the file.
+    pub sha256: String,
+    /// Architecture.
+    pub config: C,
+}
+
+/// The parsed manifest.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Manifest {
+    /// The shape prior.
+    pub shape_prior: Entry<ShapePriorConfig>,
+    /// The denoiser.
+    pub denoiser: Entry<DenoiserConfig>,
+    /// Feature scales (model space = raw / scale).
+    pub feature_scales: FeatureScales,
+    /// Category names; index = position.
+    pub categories: Vec<String>,
+    /// How the data were made (verbatim).
+    pub data: Value,
+    /// How training went (verbatim).
+    pub training: Value,
+    /// Evaluation metrics (verbatim).
+    pub metrics: Value,
+}
+
+fn shape_to_doc(c: &ShapePriorConfig) -> ShapeConfigDoc {
+    ShapeConfigDoc {
+        latent: c.latent,
+        decoder_hidden: c.decoder_hidden,
+        decoder_blocks: c.decoder_blocks,
+        encoder_hidden: c.encoder_hidden,
+        encoder_blocks: c.encoder_blocks,
+        pe_freqs: c.pe_freqs,
+    }
+}
+
+fn denoiser_to_doc(c: &DenoiserConfig) -> DenoiserConfigDoc {
+    DenoiserConfigDoc {
+        width: c.width,
+        layers: c.layers,
+        head_channels: c.head_channels,
+        t_pe_dim: c.t_pe_dim,
+        slot_pe_dim: c.slot_pe_dim,
+        node_head_hidden: c.node_head_hidden.clone(),
+        edge_head_hidden: c.edge_head_hidden.clone(),
+        categories: c.categories,
+        legacy_edge_embedding: c.legacy_edge_embedding,
+    }
+}
+
+/// Serialise a manifest.
+pub fn to_string(m: &Manifest) -> String {
+    let doc = ManifestDoc {
+        format: FORMAT.into(),
+        shape_prior: EntryDoc {
+            file: m.shape_prior.file.clone(),
+            sha256: m.shape_prior.sha256.clone(),
+            config: shape_to_doc(&m.shape_prior.config),
+        },
+        denoiser: EntryDoc {
+            file: m.denoiser.file.clone(),
+            sha256: m.denoiser.sha256.clone(),
+            config: denoiser_to_doc(&m.denoiser.config),
+        },
+        feature_scales: ScalesDoc {
+            node: m.feature_scales.node.clone(),
+            edge: m.feature_scales.edge.clone(),
+        },
+        categories: m.categories.clone(),
+        data: m.data.clone(),
+        training: m.training.clone(),
+        metrics: m.metrics.clone(),
+    };
+    serde_json::to_string_pretty(&doc).unwrap_or_default()
+}
+
+/// Parse and check a manifest.
+pub fn from_str(text: &str, path: &str) -> Result<Manifest, FormatError> {
+    let de = &mut serde_json::Deserializer::from_str(text);
+    let doc: ManifestDoc = serde_path_to_error::deserialize(de).map_err(|e| FormatError::Malformed {
+        what: "weights manifest",
+        path: format!("{path}: {}", e.path()),
+        message: e.into_inner().to_string(),
+    })?;
+    if doc.format != FORMAT {
+        return Err(crate::error::CoreError::invalid("manifest format", format!("{FORMAT:?}"), format!("{:?}", doc.format)).into());
+    }
+    let s = doc.shape_prior.config;
+    let d = doc.denoiser.config;
+    let m = Manifest {
+        shape_prior: Entry {
+            file: doc.shape_prior.file,
+            sha256: doc.shape_prior.sha256,
+            config: ShapePriorConfig {
+                latent: s.latent,
+                decoder_hidden: s.decoder_hidden,
+                decoder_blocks: s.decoder_blocks,
+                encoder_hidden: s.encoder_hidden,
+                encoder_blocks: s.encoder_blocks,
+                pe_freqs: s.pe_freqs,
+            },
+        },
+        denoiser: Entry {
+            file: doc.denoiser.file,
+            sha256: doc.denoiser.sha256,
+            config: DenoiserConfig {
+                width: d.width,
+                layers: d.layers,
+                head_channels: d.head_channels,
+                t_pe_dim: d.t_pe_dim,
+                slot_pe_dim: d.slot_pe_dim,
+                node_head_hidden: d.node_head_hidden,
+                edge_head_hidden: d.edge_head_hidden,
+                categories: d.categories,
+                legacy_edge_embedding: d.legacy_edge_embedding,
+            },
+        },
+        feature_scales: FeatureScales {
+            node: doc.feature_scales.node,
+            edge: doc.feature_scales.edge,
+        },
+        categories: doc.categories,
+        data: doc.data,
+        training: doc.training,
+        metrics: doc.metrics,
+    };
+    m.feature_scales.validate()?;
+    if m.denoiser.config.categories != 0 && m.denoiser.config.categories != m.categories.len() {
+        return Err(crate::error::CoreError::invalid(
+            "manifest denoiser.config.categories",
+            format!("0 or the number of listed categories ({})", m.categories.len()),
+            m.denoiser.config.categories,
+        )
+        .into());
+    }
+    Ok(m)
+}
+
+/// Both models, loaded and verified.
+pub struct LoadedModels {
+    /// The manifest they came from.
+    pub manifest: Manifest,
+    /// The shape prior (inference device).
+    pub shape_prior: ShapePrior,
+    /// The denoiser (inference device).
+    pub denoiser: Denoiser,
+}
+
+/// Read `dir/manifest.json` and load both models on `device`, verifying sha256 and configs.
+pub fn load_models(dir: &Path, device: &burn::tensor::Device) -> Result<LoadedModels, FormatError> {
+    let path = dir.join("manifest.json");
+    let text = std::fs::read_to_string(&path).map_err(|source| FormatError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    let manifest = from_str(&text, &path.display().to_string())?;
+    manifest.shape_prior.config.validate().map_err(|e| FormatError::Malformed {
+        what: "weights manifest",
+        path: format!("{}: shape_prior.config", path.display()),
+        message: e.to_string(),
+    })?;
+    let mut shape_prior = ShapePrior::new(&manifest.shape_prior.config, device);
+    weights::load(&mut shape_prior, &dir.join(&manifest.shape_prior.file), Some(&manifest.shape_prior.sha256))?;
+    let mut denoiser = Denoiser::new(&manifest.denoiser.config, device).map_err(|e| FormatError::Malformed {
+        what: "weights manifest",
+        path: format!("{}: denoiser.config", path.display()),
+        message: e.to_string(),
+    })?;
+    weights::load(&mut denoiser, &dir.join(&manifest.denoiser.file), Some(&manifest.denoiser.sha256))?;
+    Ok(LoadedModels {
+        manifest,
+        shape_prior,
+        denoiser,
+    })
+}

@@ -1,0 +1,327 @@
+//! `physnap train diffusion`: the articulation denoiser's training loop (method.md §2).
+//!
+//! Why it exists: one command turns an imported data set plus the shape prior's codebook into
+//! denoiser weights. Per step: draw `batch_objects` training graphs, permute their node slots
+//! at random (§1.6), scale them by the training-split feature scales (§1.7), replicate each
+//! `noise_levels` times with its own t ~ U{0..999} and ε ~ N(0, I), and minimise NAP's grouped
+//! ε-prediction loss
+//!
+//! ```text
+//! e = (ε − ε̂)², averaged over the 8 node slots / 28 edge rows
+//! L_node = ¼ [e_o + mean(e_b) + mean(e_t) + mean(e_s)]
+//! L_edge = mean(e_c̃) + mean(e_Plücker) + mean(e_ρ)
+//! L = mean over samples of (L_node + L_edge), clamped to [−100, 100]
+//! ```
+//!
+//! with Adam. Category conditioning: each sample carries its object's category index, replaced
+//! by the "no category" row with probability `category_dropout`, so one model serves both the
+//! category-aware and the unconditional mode.
+//!
+//! Reproducibility and resume: step s draws everything from `Rng::fork(seed, s)`, so a resumed
+//! run sees exactly the batches and noise of an uninterrupted one. Checkpoints
+//! (`denoiser.safetensors` + `checkpoint.json`) are written every `checkpoint_every` steps and at
+//! the end; `resume` continues from them. Adam's moment estimates are not checkpointed and
+//! restart from zero on resume (documented deviation; the loss recovers within a few hundred
+//! steps).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use burn::module::AutodiffModule;
+use burn::optim::{AdamConfig, GradientsParams, Optimizer};
+use burn::tensor::{Int, Tensor, TensorData};
+use serde_json::{Value, json};
+
+use super::TrainError;
+use crate::data::categories::CATEGORIES;
+use crate::data::rng::Rng;
+use crate::engine::schedule::Schedule;
+use crate::graph::{EDGE_DIM, FeatureScales, GraphTensor, K, NODE_DIM, NUM_EDGES, edge_ch, node_ch};
+use crate::io::npy;
+use crate::model::denoiser::{Denoiser, DenoiserConfig};
+use crate::model::{cpu_autodiff, weights};
+
+/// Training knobs.
+#[derive(Debug, Clone)]
+pub struct DiffusionTrainConfig {
+    /// Denoiser architecture.
+    pub model: DenoiserConfig,
+    /// Total optimiser steps.
+    pub steps: usize,
+    /// Objects per step.
+    pub batch_objects: usize,
+    /// Noise levels per object per step (NAP: 10).
+    pub noise_levels: usize,
+    /// Adam learning rate.
+    pub lr: f64,
+    /// Seed.
+    pub seed: u64,
+    /// Probability of replacing the category by "no category".
+    pub category_dropout: f64,
+    /// Steps between checkpoints.
+    pub checkpoint_every: usize,
+}
+
+impl Default for DiffusionTrainConfig {
+    fn default() -> Self {
+        DiffusionTrainConfig {
+            model: DenoiserConfig::default(),
+            steps: 20_000,
+            batch_objects: 32,
+            noise_levels: 4,
+            lr: 2e-4,
+            seed: 12345,
+            category_dropout: 0.2,
+            checkpoint_every: 1000,
+        }
+    }
+}
+
+/// One progress report.
+#[derive(Debug, Clone)]
+pub struct DiffusionProgress {
+    /// Steps done.
+    pub step: usize,
+    /// Steps planned.
+    pub total: usize,
+    /// Loss of this step.
+    pub loss: f64,
+    /// Exponential moving average of the loss.
+    pub loss_ema: f64,
+    /// Seconds since the start of this run.
+    pub elapsed: f64,
+}
+
+/// The training set in memory: raw graphs (codes filled in) and category indices.
+pub struct DiffusionData {
+    /// Raw (unscaled) training graphs, real nodes first.
+    pub graphs: Vec<GraphTensor>,
+    /// Category index per graph.
+    pub categories: Vec<usize>,
+    /// Feature scales fitted on the training split and the whole codebook.
+    pub scales: FeatureScales,
+}
+
+fn data_err(path: &Path, detail: impl Into<String>) -> TrainError {
+    TrainError::Data {
+        path: path.display().to_string(),
+        detail: detail.into(),
+    }
+}
+
+fn read_json(path: &Path) -> Result<Value, TrainError> {
+    let text = std::fs::read_to_string(path).map_err(|e| data_err(path, e.to_string()))?;
+    serde_json::from_str(&text).map_err(|e| data_err(path, e.to_string()))
+}
+
+/// Load the training split with latent codes from the shape prior's codebook
+/// (`shape/codebook.npy` + `shape/codebook.json`).
+pub fn load_data(data: &Path, shape: &Path) -> Result<DiffusionData, TrainError> {
+    let index = read_json(&data.join("dataset.json"))?;
+    let (rows, cols, codes) = npy::read(&shape.join("codebook.npy")).map_err(|e| data_err(&shape.join("codebook.npy"), e.to_string()))?;
+    if cols != crate::object::LATENT_DIM {
+        return Err(data_err(&shape.join("codebook.npy"), format!("codes have {cols} dimensions, expected {}", crate::object::LATENT_DIM)));
+    }
+    let keys = read_json(&shape.join("codebook.json"))?;
+    let keys: Vec<String> = keys["keys"]
+        .as_array()
+        .ok_or_else(|| data_err(&shape.join("codebook.json"), "no \"keys\" list"))?
+        .iter()
+        .map(|k| k.as_str().unwrap_or_default().to_string())
+        .collect();
+    if keys.len() != rows {
+        return Err(data_err(&shape.join("codebook.json"), format!("{} keys for {rows} codes", keys.len())));
+    }
+    let code_of: std::collections::HashMap<&str, &[f32]> = keys
+        .iter()
+        .enumerate()
+        .map(|(i, k)| (k.as_str(), &codes[i * cols..(i + 1) * cols]))
+        .collect();
+    let mut graphs = Vec::new();
+    let mut categories = Vec::new();
+    for o in index["objects"].as_array().into_iter().flatten() {
+        if o["split"] != "train" {
+            continue;
+        }
+        let id = o["id"].as_str().unwrap_or_default();
+        let path = data.join("objects").join(id).join("graph.npy");
+        let (_, _, flat) = npy::read(&path).map_err(|e| data_err(&path, e.to_string()))?;
+        let mut g = GraphTensor::from_flat(&flat).map_err(|e| data_err(&path, e.to_string()))?;
+        for k in 0..K {
+            if g.node(k)[node_ch::EXIST] < 0.5 {
+                continue;
+            }
+            let key = format!("{id}_{k}");
+            let code = code_of
+                .get(key.as_str())
+                .ok_or_else(|| data_err(&shape.join("codebook.json"), format!("no code for part {key}")))?;
+            g.node_mut(k)[node_ch::LATENT..].copy_from_slice(code);
+        }
+        graphs.push(g);
+        categories.push(o["category_index"].as_u64().unwrap_or(0) as usize);
+    }
+    if graphs.is_empty() {
+        return Err(data_err(&data.join("dataset.json"), "no training objects"));
+    }
+    let scales = FeatureScales::fit(&graphs, codes.chunks_exact(cols));
+    Ok(DiffusionData { graphs, categories, scales })
+}
+
+/// NAP's grouped loss on (prediction, target) pairs, per sample, averaged over the batch.
+pub fn grouped_loss(pred_v: Tensor<3>, pred_e: Tensor<3>, eps_v: Tensor<3>, eps_e: Tensor<3>) -> Tensor<1> {
+    let ev = (pred_v - eps_v).powi_scalar(2).mean_dim(1); // [B, 1, 135]
+    let ee = (pred_e - eps_e).powi_scalar(2).mean_dim(1); // [B, 1, 13]
+    let group = |x: &Tensor<3>, a: usize, b: usize| x.clone().narrow(2, a, b - a).mean_dim(2);
+    let node = (group(&ev, node_ch::EXIST, node_ch::BOX)
+        + group(&ev, node_ch::BOX, node_ch::CENTER)
+        + group(&ev, node_ch::CENTER, node_ch::LATENT)
+        + group(&ev, node_ch::LATENT, NODE_DIM))
+        / 4.0;
+    let edge = group(&ee, edge_ch::CLASS, edge_ch::DIR)
+        + group(&ee, edge_ch::DIR, edge_ch::REVOLUTE)
+        + group(&ee, edge_ch::REVOLUTE, EDGE_DIM);
+    (node + edge).mean().clamp(-100.0, 100.0)
+}
+
+/// What the run did.
+#[derive(Debug, Clone)]
+pub struct DiffusionTrainReport {
+    /// Steps completed in total (including resumed ones).
+    pub steps: usize,
+    /// Wall time of this run (seconds).
+    pub wall_seconds: f64,
+    /// Final loss EMA.
+    pub final_loss: f64,
+    /// The weights file.
+    pub weights: PathBuf,
+    /// sha256 of the weights file.
+    pub sha256: String,
+}
+
+fn randn(rng: &mut Rng, n: usize) -> Vec<f32> {
+    (0..n).map(|_| rng.gauss() as f32).collect()
+}
+
+/// Train (or resume training) the denoiser; writes `denoiser.safetensors`, `checkpoint.json`
+/// and `diffusion_train.json` into `out`.
+pub fn train_diffusion(
+    data: &DiffusionData,
+    cfg: &DiffusionTrainConfig,
+    out: &Path,
+    resume: bool,
+    progress: &mut dyn FnMut(&DiffusionProgress),
+) -> Result<DiffusionTrainReport, TrainError> {
+    cfg.model.validate().map_err(TrainError::Model)?;
+    for (field, ok, limit, value) in [
+        ("steps", cfg.steps >= 1, "at least 1", cfg.steps.to_string()),
+        ("batch_objects", cfg.batch_objects >= 1, "at least 1", cfg.batch_objects.to_string()),
+        ("noise_levels", cfg.noise_levels >= 1, "at least 1", cfg.noise_levels.to_string()),
+        ("lr", cfg.lr > 0.0 && cfg.lr.is_finite(), "> 0", cfg.lr.to_string()),
+        ("category_dropout", (0.0..=1.0).contains(&cfg.category_dropout), "within [0, 1]", cfg.category_dropout.to_string()),
+    ] {
+        if !ok {
+            return Err(TrainError::Config { field: field.into(), limit: limit.into(), value });
+        }
+    }
+    std::fs::create_dir_all(out).map_err(|e| data_err(out, e.to_string()))?;
+    let device = cpu_autodiff();
+    let schedule = Schedule::default();
+    let mut model = Denoiser::new(&cfg.model, &device);
+    let weights_path = out.join("denoiser.safetensors");
+    let ckpt_path = out.join("checkpoint.json");
+    let mut start = 0usize;
+    if resume && ckpt_path.is_file() {
+        let ck = read_json(&ckpt_path)?;
+        start = ck["step"].as_u64().unwrap_or(0) as usize;
+        weights::load(&mut model, &weights_path, ck["sha256"].as_str())?;
+    }
+    let mut optim = AdamConfig::new().init();
+    let t0 = Instant::now();
+    let mut ema = f64::NAN;
+    let no_category = cfg.model.categories;
+    let bsz = cfg.batch_objects * cfg.noise_levels;
+    let mut sha = String::new();
+    for step in start..cfg.steps {
+        let mut rng = Rng::fork(cfg.seed, step as u64);
+        let mut x0 = Vec::with_capacity(bsz);
+        let mut ts = Vec::with_capacity(bsz);
+        let mut cats = Vec::with_capacity(bsz);
+        for _ in 0..cfg.batch_objects {
+            let k = rng.int(0, data.graphs.len() - 1);
+            let mut perm: [usize; K] = std::array::from_fn(|i| i);
+            for i in (1..K).rev() {
+                perm.swap(i, rng.int(0, i));
+            }
+            let g = data.graphs[k].permuted(&perm).map_err(TrainError::Core)?.scaled(&data.scales);
+            for _ in 0..cfg.noise_levels {
+                x0.push(g.clone());
+                ts.push(rng.int(0, schedule.len() - 1));
+                cats.push(if no_category == 0 || rng.chance(cfg.category_dropout) {
+                    no_category
+                } else {
+                    data.categories[k]
+                });
+            }
+        }
+        let (v0, e0) = crate::engine::to_tensors(&x0, &device);
+        let eps_v = Tensor::<3>::from_data(TensorData::new(randn(&mut rng, bsz * K * NODE_DIM), [bsz, K, NODE_DIM]), &device);
+        let eps_e = Tensor::<3>::from_data(TensorData::new(randn(&mut rng, bsz * NUM_EDGES * EDGE_DIM), [bsz, NUM_EDGES, EDGE_DIM]), &device);
+        let (sa, sb): (Vec<f32>, Vec<f32>) = ts
+            .iter()
+            .map(|&t| {
+                let (a, b) = schedule.noise_coefficients(t);
+                (a as f32, b as f32)
+            })
+            .unzip();
+        let sa = Tensor::<3>::from_data(TensorData::new(sa, [bsz, 1, 1]), &device);
+        let sb = Tensor::<3>::from_data(TensorData::new(sb, [bsz, 1, 1]), &device);
+        let vt = v0 * sa.clone() + eps_v.clone() * sb.clone();
+        let et = e0 * sa + eps_e.clone() * sb;
+        let t = Tensor::<1, Int>::from_data(TensorData::new(ts.iter().map(|&t| t as i64).collect::<Vec<_>>(), [bsz]), &device);
+        let category = (no_category > 0).then(|| {
+            Tensor::<1, Int>::from_data(TensorData::new(cats.iter().map(|&c| c as i64).collect::<Vec<_>>(), [bsz]), &device)
+        });
+        let (pv, pe) = model.forward(vt, et, t, category);
+        let loss = grouped_loss(pv, pe, eps_v, eps_e);
+        let value: f64 = loss.clone().into_data().try_to_vec::<f32>().map(|v| v[0] as f64).unwrap_or(f64::NAN);
+        if !value.is_finite() {
+            return Err(TrainError::Diverged { step: step + 1, value });
+        }
+        let grads = GradientsParams::from_grads(loss.backward(), &model);
+        model = optim.step(cfg.lr, model, grads);
+        ema = if ema.is_nan() { value } else { 0.99 * ema + 0.01 * value };
+        progress(&DiffusionProgress {
+            step: step + 1,
+            total: cfg.steps,
+            loss: value,
+            loss_ema: ema,
+            elapsed: t0.elapsed().as_secs_f64(),
+        });
+        if (step + 1) % cfg.checkpoint_every == 0 || step + 1 == cfg.steps {
+            sha = weights::save(&model.valid(), &weights_path)?;
+            let ck = json!({ "step": step + 1, "sha256": sha, "loss_ema": ema });
+            std::fs::write(&ckpt_path, ck.to_string()).map_err(|e| data_err(&ckpt_path, e.to_string()))?;
+        }
+    }
+    if sha.is_empty() {
+        // Resumed a finished run: nothing trained, report the existing weights.
+        sha = weights::sha256_hex(&std::fs::read(&weights_path).map_err(|e| data_err(&weights_path, e.to_string()))?);
+    }
+    let wall = t0.elapsed().as_secs_f64();
+    let summary = json!({
+        "steps": cfg.steps, "resumed_from": start, "wall_seconds": wall, "final_loss_ema": ema,
+        "batch_objects": cfg.batch_objects, "noise_levels": cfg.noise_levels, "lr": cfg.lr,
+        "seed": cfg.seed, "category_dropout": cfg.category_dropout,
+        "feature_scales": { "node": data.scales.node, "edge": data.scales.edge },
+        "categories": CATEGORIES.to_vec(), "train_objects": data.graphs.len(), "sha256": sha,
+    });
+    let path = out.join("diffusion_train.json");
+    std::fs::write(&path, serde_json::to_string_pretty(&summary).unwrap_or_default()).map_err(|e| data_err(&path, e.to_string()))?;
+    Ok(DiffusionTrainReport {
+        steps: cfg.steps,
+        wall_seconds: wall,
+        final_loss: ema,
+        weights: weights_path,
+        sha256: sha,
+    })
+}

@@ -21,12 +21,9 @@ pub mod urdf;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use rayon::prelude::*;
-
 use crate::error::CoreError;
-use crate::mesh::{MeshingOptions, TriMesh, part_mesh};
+use crate::mesh::{MeshingOptions, TriMesh};
 use crate::object::ArticulatedObject;
-use crate::shape::LatentDecoder;
 
 /// Errors of the export layer.
 #[derive(Debug, thiserror::Error)]
@@ -100,17 +97,7 @@ pub struct ExportReport {
     pub empty_parts: Vec<String>,
 }
 
-/// Mesh every part (object frame, rest state), in parallel on the current rayon pool.
-pub fn mesh_parts(
-    obj: &ArticulatedObject,
-    decoder: Option<&dyn LatentDecoder>,
-    opts: &MeshingOptions,
-) -> Result<Vec<TriMesh>, CoreError> {
-    obj.parts
-        .par_iter()
-        .map(|p| part_mesh(p, decoder, opts))
-        .collect()
-}
+pub use crate::mesh::mesh_parts;
 
 /// Write all artefacts for `obj` into `out` (created if missing).
 pub fn export_dir(

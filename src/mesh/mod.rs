@@ -19,7 +19,7 @@ use nalgebra::Vector3;
 use rayon::prelude::*;
 
 use crate::error::{CoreError, CoreResult};
-use crate::object::Part;
+use crate::object::{ArticulatedObject, Part};
 use crate::shape::{AnalyticSdf, LatentDecoder, PartShape, Sdf};
 
 /// Half-width of the meshing domain in the normalised part frame.
@@ -205,6 +205,18 @@ pub fn part_mesh(
     };
     let (k, t) = (kappa as f32, part.center.map(|v| v as f32));
     Ok(normalised.map_positions(|q| [t.x + k * q[0], t.y + k * q[1], t.z + k * q[2]]))
+}
+
+/// Mesh every part (object frame, rest state), in parallel on the current rayon pool.
+pub fn mesh_parts(
+    obj: &ArticulatedObject,
+    decoder: Option<&dyn LatentDecoder>,
+    opts: &MeshingOptions,
+) -> Result<Vec<TriMesh>, CoreError> {
+    obj.parts
+        .par_iter()
+        .map(|p| part_mesh(p, decoder, opts))
+        .collect()
 }
 
 #[cfg(test)]

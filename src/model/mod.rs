@@ -6,6 +6,8 @@
 //! the crate uses. CPU work runs on the *current* rayon pool, so callers bound a job with
 //! `ThreadPool::install` (ml-stack.md §4).
 
+pub mod denoiser;
+
 use burn::tensor::Device;
 
 pub mod weights;

@@ -5,6 +5,7 @@
 //! users get) and [`graph::GraphTensor`] (what the diffusion model sees).
 
 pub mod data;
+pub mod engine;
 pub mod error;
 pub mod export;
 pub mod fixtures;

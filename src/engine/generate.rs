@@ -77,7 +77,12 @@ pub fn generate(
                 category: req.category,
             },
             &device,
-            &mut |s| on_step(&GenerateEvent { sample: i, step: s.clone() }),
+            &mut |s| {
+                on_step(&GenerateEvent {
+                    sample: i,
+                    step: s.clone(),
+                })
+            },
         )?;
         let raw = graphs[0].unscaled(scales);
         let object = project(
@@ -93,13 +98,14 @@ pub fn generate(
             limit: "a projectable graph".into(),
             value: e.to_string(),
         })?;
-        let meshes = crate::mesh::mesh_parts(&object, Some(decoder), &req.meshing).map_err(|e| {
-            EngineError::Invalid {
-                field: "meshing".into(),
-                limit: "valid meshing options".into(),
-                value: e.to_string(),
-            }
-        })?;
+        let meshes =
+            crate::mesh::mesh_parts(&object, Some(decoder), &req.meshing).map_err(|e| {
+                EngineError::Invalid {
+                    field: "meshing".into(),
+                    limit: "valid meshing options".into(),
+                    value: e.to_string(),
+                }
+            })?;
         out.push(Generated {
             index: i,
             seed,

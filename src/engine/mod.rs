@@ -5,6 +5,7 @@
 //! current rayon pool, reports every step through a callback (progress, cancellation, previews)
 //! and returns raw graphs for projection and export.
 
+pub mod generate;
 pub mod sample;
 pub mod schedule;
 
@@ -60,8 +61,14 @@ impl EngineError {
 /// Stack graphs into (V [B, 8, 135], E [B, 28, 13]) tensors.
 pub fn to_tensors(graphs: &[GraphTensor], device: &Device) -> (Tensor<3>, Tensor<3>) {
     let b = graphs.len();
-    let v: Vec<f32> = graphs.iter().flat_map(|g| g.nodes.iter().copied()).collect();
-    let e: Vec<f32> = graphs.iter().flat_map(|g| g.edges.iter().copied()).collect();
+    let v: Vec<f32> = graphs
+        .iter()
+        .flat_map(|g| g.nodes.iter().copied())
+        .collect();
+    let e: Vec<f32> = graphs
+        .iter()
+        .flat_map(|g| g.edges.iter().copied())
+        .collect();
     (
         Tensor::from_data(TensorData::new(v, [b, K, NODE_DIM]), device),
         Tensor::from_data(TensorData::new(e, [b, NUM_EDGES, EDGE_DIM]), device),

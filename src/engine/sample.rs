@@ -64,11 +64,17 @@ pub fn sample(
     let b = req.batch;
     let (nv, ne) = (b * K * NODE_DIM, b * NUM_EDGES * EDGE_DIM);
     let mut rng = Rng::new(req.seed);
-    let mut v = Tensor::<3>::from_data(TensorData::new(gaussian(&mut rng, nv), [b, K, NODE_DIM]), device);
-    let mut e = Tensor::<3>::from_data(TensorData::new(gaussian(&mut rng, ne), [b, NUM_EDGES, EDGE_DIM]), device);
-    let category = req.category.map(|c| {
-        Tensor::<1, Int>::from_data(TensorData::new(vec![c as i64; b], [b]), device)
-    });
+    let mut v = Tensor::<3>::from_data(
+        TensorData::new(gaussian(&mut rng, nv), [b, K, NODE_DIM]),
+        device,
+    );
+    let mut e = Tensor::<3>::from_data(
+        TensorData::new(gaussian(&mut rng, ne), [b, NUM_EDGES, EDGE_DIM]),
+        device,
+    );
+    let category = req
+        .category
+        .map(|c| Tensor::<1, Int>::from_data(TensorData::new(vec![c as i64; b], [b]), device));
     let total = schedule.len();
     for (k, t) in (0..total).rev().enumerate() {
         let tt = Tensor::<1, Int>::from_data(TensorData::new(vec![t as i64; b], [b]), device);
@@ -77,23 +83,124 @@ pub fn sample(
         v = v * c.c_x - eps_v * c.c_eps;
         e = e * c.c_x - eps_e * c.c_eps;
         if c.sigma > 0.0 {
-            let zv = Tensor::<3>::from_data(TensorData::new(gaussian(&mut rng, nv), [b, K, NODE_DIM]), device);
-            let ze = Tensor::<3>::from_data(TensorData::new(gaussian(&mut rng, ne), [b, NUM_EDGES, EDGE_DIM]), device);
+            let zv = Tensor::<3>::from_data(
+                TensorData::new(gaussian(&mut rng, nv), [b, K, NODE_DIM]),
+                device,
+            );
+            let ze = Tensor::<3>::from_data(
+                TensorData::new(gaussian(&mut rng, ne), [b, NUM_EDGES, EDGE_DIM]),
+                device,
+            );
             v = v + zv * c.sigma;
             e = e + ze * c.sigma;
         }
         // A cheap divergence check every 50 steps and at the end.
         if k % 50 == 49 || t == 0 {
             for (what, x) in [("nodes", &v), ("edges", &e)] {
-                let s: f32 = x.clone().abs().max().into_scalar().elem();
+                let s: f32 = x.clone().abs().max().into_scalar::<f32>();
                 if !s.is_finite() {
-                    return Err(EngineError::Diverged { step: k + 1, t, what });
+                    return Err(EngineError::Diverged {
+                        step: k + 1,
+                        t,
+                        what,
+                    });
                 }
             }
         }
-        if let ControlFlow::Break(reason) = on_step(&StepEvent { step: k + 1, total, t }) {
-            return Err(EngineError::Stopped { step: k + 1, total, reason });
+        if let ControlFlow::Break(reason) = on_step(&StepEvent {
+            step: k + 1,
+            total,
+            t,
+        }) {
+            return Err(EngineError::Stopped {
+                step: k + 1,
+                total,
+                reason,
+            });
         }
     }
     Ok(from_tensors(v, e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::denoiser::DenoiserConfig;
+
+    fn tiny() -> Denoiser {
+        let cfg = DenoiserConfig {
+            width: 16,
+            layers: 1,
+            head_channels: 8,
+            node_head_hidden: vec![16],
+            edge_head_hidden: vec![16],
+            categories: 3,
+            ..DenoiserConfig::default()
+        };
+        Denoiser::new(&cfg, &crate::model::cpu()).unwrap()
+    }
+
+    #[test]
+    fn sampling_is_deterministic_per_seed_and_reports_every_step() {
+        let model = tiny();
+        let schedule = Schedule::default();
+        let dev = crate::model::cpu();
+        let req = SampleRequest {
+            seed: 7,
+            batch: 2,
+            category: Some(1),
+        };
+        let mut steps = Vec::new();
+        let a = sample(&model, &schedule, &req, &dev, &mut |s| {
+            steps.push(s.t);
+            ControlFlow::Continue(())
+        })
+        .unwrap();
+        assert_eq!(steps.len(), 1000);
+        assert_eq!((steps[0], steps[999]), (999, 0));
+        let b = sample(&model, &schedule, &req, &dev, &mut |_| {
+            ControlFlow::Continue(())
+        })
+        .unwrap();
+        assert_eq!(a, b);
+        assert!(a.iter().all(|g| g.flatten().iter().all(|v| v.is_finite())));
+        let c = sample(
+            &model,
+            &schedule,
+            &SampleRequest {
+                seed: 8,
+                ..req.clone()
+            },
+            &dev,
+            &mut |_| ControlFlow::Continue(()),
+        )
+        .unwrap();
+        assert_ne!(a, c);
+    }
+
+    #[test]
+    fn the_callback_can_stop_a_run() {
+        let model = tiny();
+        let req = SampleRequest {
+            seed: 1,
+            batch: 1,
+            category: None,
+        };
+        let e = sample(
+            &model,
+            &Schedule::default(),
+            &req,
+            &crate::model::cpu(),
+            &mut |s| {
+                if s.step == 5 {
+                    ControlFlow::Break("cancelled".into())
+                } else {
+                    ControlFlow::Continue(())
+                }
+            },
+        )
+        .unwrap_err();
+        assert!(matches!(e, EngineError::Stopped { step: 5, .. }), "{e}");
+        assert!(e.to_string().contains("cancelled"));
+    }
 }

@@ -116,7 +116,11 @@ mod tests {
         let s = Schedule::default();
         assert_eq!(s.len(), 1000);
         let close = |t: usize, v: f64, rel: f64| {
-            assert!((s.alpha_bar[t] - v).abs() / v < rel, "ᾱ_{t} = {} vs {v}", s.alpha_bar[t]);
+            assert!(
+                (s.alpha_bar[t] - v).abs() / v < rel,
+                "ᾱ_{t} = {} vs {v}",
+                s.alpha_bar[t]
+            );
         };
         close(0, 0.999, 1e-12);
         close(99, 0.8234, 1e-3);
@@ -134,7 +138,11 @@ mod tests {
         let eps = [0.5f32, 0.1, -2.0];
         for t in [0usize, 10, 500, 999] {
             let (a, b) = s.noise_coefficients(t);
-            let xt: Vec<f32> = x0.iter().zip(&eps).map(|(x, e)| (a * *x as f64 + b * *e as f64) as f32).collect();
+            let xt: Vec<f32> = x0
+                .iter()
+                .zip(&eps)
+                .map(|(x, e)| (a * *x as f64 + b * *e as f64) as f32)
+                .collect();
             let back = s.predict_x0(t, &xt, &eps);
             for (u, v) in back.iter().zip(&x0) {
                 assert!((u - v).abs() < 1e-3 * (1.0 / a as f32), "t={t}: {u} vs {v}");

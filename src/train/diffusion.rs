@@ -103,10 +103,7 @@ pub struct DiffusionData {
 }
 
 fn data_err(path: &Path, detail: impl Into<String>) -> TrainError {
-    TrainError::Data {
-        path: path.display().to_string(),
-        detail: detail.into(),
-    }
+    TrainError::data(path, detail)
 }
 
 fn read_json(path: &Path) -> Result<Value, TrainError> {
@@ -127,7 +124,7 @@ pub fn load_data(data: &Path, shape: &Path) -> Result<DiffusionData, TrainError>
         .as_array()
         .ok_or_else(|| data_err(&shape.join("codebook.json"), "no \"keys\" list"))?
         .iter()
-        .map(|k| k.as_str().unwrap_or_default().to_string())
+        .map(|k| k["key"].as_str().or(k.as_str()).unwrap_or_default().to_string())
         .collect();
     if keys.len() != rows {
         return Err(data_err(&shape.join("codebook.json"), format!("{} keys for {rows} codes", keys.len())));
@@ -211,7 +208,7 @@ pub fn train_diffusion(
     resume: bool,
     progress: &mut dyn FnMut(&DiffusionProgress),
 ) -> Result<DiffusionTrainReport, TrainError> {
-    cfg.model.validate().map_err(TrainError::Model)?;
+    cfg.model.validate()?;
     for (field, ok, limit, value) in [
         ("steps", cfg.steps >= 1, "at least 1", cfg.steps.to_string()),
         ("batch_objects", cfg.batch_objects >= 1, "at least 1", cfg.batch_objects.to_string()),
@@ -226,7 +223,7 @@ pub fn train_diffusion(
     std::fs::create_dir_all(out).map_err(|e| data_err(out, e.to_string()))?;
     let device = cpu_autodiff();
     let schedule = Schedule::default();
-    let mut model = Denoiser::new(&cfg.model, &device);
+    let mut model = Denoiser::new(&cfg.model, &device)?;
     let weights_path = out.join("denoiser.safetensors");
     let ckpt_path = out.join("checkpoint.json");
     let mut start = 0usize;
@@ -285,7 +282,7 @@ pub fn train_diffusion(
         let loss = grouped_loss(pv, pe, eps_v, eps_e);
         let value: f64 = loss.clone().into_data().try_to_vec::<f32>().map(|v| v[0] as f64).unwrap_or(f64::NAN);
         if !value.is_finite() {
-            return Err(TrainError::Diverged { step: step + 1, value });
+            return Err(TrainError::Diverged { step, loss: value });
         }
         let grads = GradientsParams::from_grads(loss.backward(), &model);
         model = optim.step(cfg.lr, model, grads);

@@ -16,6 +16,7 @@ pub mod mesh;
 pub mod model;
 pub mod object;
 pub mod pointcloud;
+pub mod render;
 pub mod shape;
 
 pub use error::{CoreError, CoreResult};

@@ -36,6 +36,8 @@ struct Cli {
 enum Command {
     /// Write GLB + URDF (+ meshes, zip bundle) for an articulated-object JSON.
     Export(ExportArgs),
+    /// Draw objects to a PNG: one object at rest and at its joint limits, or a contact sheet.
+    Render(RenderArgs),
     /// Data sets: procedural objects, PartNet-Mobility import, partial scans.
     Data {
         #[command(subcommand)]
@@ -136,6 +138,22 @@ struct TestsetArgs {
 }
 
 #[derive(Args, Debug)]
+struct RenderArgs {
+    /// Object JSON file(s) (physnap.object/v1). Several files make a contact sheet.
+    #[arg(required = true, num_args = 1.., env = "PHYSNAP_RENDER_OBJECTS", value_delimiter = ',')]
+    objects: Vec<PathBuf>,
+    /// Output PNG.
+    #[arg(long, env = "PHYSNAP_OUT")]
+    out: PathBuf,
+    /// Panel size in pixels.
+    #[arg(long, env = "PHYSNAP_RENDER_SIZE", default_value_t = 320)]
+    size: usize,
+    /// Contact-sheet columns.
+    #[arg(long, env = "PHYSNAP_RENDER_COLUMNS", default_value_t = 4)]
+    columns: usize,
+}
+
+#[derive(Args, Debug)]
 struct ExportArgs {
     /// The articulated-object JSON to export (format physnap.object/v1).
     #[arg(long, env = "PHYSNAP_OBJECT")]
@@ -178,6 +196,7 @@ fn main() -> ExitCode {
 fn run(command: Command) -> anyhow::Result<()> {
     match command {
         Command::Export(a) => export(a),
+        Command::Render(a) => render(a),
         Command::Data { command } => match command {
             DataCommand::Synth(a) => data_cmd::synth(a),
             DataCommand::Import(a) => data_cmd::import(a),
@@ -185,6 +204,35 @@ fn run(command: Command) -> anyhow::Result<()> {
             DataCommand::Testset(a) => data_cmd::testset(a),
         },
     }
+}
+
+fn render(a: RenderArgs) -> anyhow::Result<()> {
+    if !(16..=4096).contains(&a.size) {
+        anyhow::bail!("invalid --size: {} (must be between 16 and 4096)", a.size);
+    }
+    let mut items = Vec::new();
+    for path in &a.objects {
+        let obj = physnap::io::object_json::read(path)
+            .with_context(|| format!("reading {}", path.display()))?;
+        let meshes = obj
+            .parts
+            .iter()
+            .map(|p| {
+                physnap::mesh::primitives::part_primitive_mesh(p).with_context(|| {
+                    format!("{}: part {:?} has a latent shape; render the exported sample's object.json after meshing, or use analytic shapes", path.display(), p.name)
+                })
+            })
+            .collect::<anyhow::Result<Vec<_>>>()?;
+        items.push((obj, meshes));
+    }
+    let img = if items.len() == 1 {
+        physnap::render::render_limits(&items[0].0, &items[0].1, a.size)
+    } else {
+        physnap::render::contact_sheet(&items, a.columns, a.size)
+    };
+    std::fs::write(&a.out, img.to_png()).with_context(|| format!("writing {}", a.out.display()))?;
+    println!("{} ({}x{})", a.out.display(), img.width, img.height);
+    Ok(())
 }
 
 fn export(a: ExportArgs) -> anyhow::Result<()> {

@@ -222,8 +222,8 @@ fn raster(img: &mut Image, zbuf: &mut [f64], v: [(f64, f64, f64); 3], col: [f64;
             let k = y * img.width + x;
             if z < zbuf[k] {
                 zbuf[k] = z;
-                for c in 0..3 {
-                    img.rgb[k * 3 + c] = (col[c] * 255.0).clamp(0.0, 255.0) as u8;
+                for (dst, c) in img.rgb[k * 3..k * 3 + 3].iter_mut().zip(col) {
+                    *dst = (c * 255.0).clamp(0.0, 255.0) as u8;
                 }
             }
         }

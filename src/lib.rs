@@ -16,6 +16,7 @@ pub mod model;
 pub mod object;
 pub mod pointcloud;
 pub mod shape;
+pub mod train;
 
 pub use error::{CoreError, CoreResult};
 pub use graph::GraphTensor;

@@ -6,6 +6,8 @@
 //! the crate uses. CPU work runs on the *current* rayon pool, so callers bound a job with
 //! `ThreadPool::install` (ml-stack.md §4).
 
+pub mod shape_prior;
+
 use burn::tensor::Device;
 
 /// The inference device: Flex (pure-Rust CPU).
@@ -54,7 +56,7 @@ mod tests {
         let y = (x.clone() * x.clone()).sum();
         let grads = y.backward();
         let g = x.grad(&grads).expect("gradient");
-        let v: Vec<f32> = g.into_data().to_vec().expect("f32 data");
+        let v: Vec<f32> = g.into_data().try_to_vec().expect("f32 data");
         assert_eq!(v, vec![2.0, 4.0, 6.0]);
     }
 }

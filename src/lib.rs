@@ -18,6 +18,7 @@ pub mod object;
 pub mod pointcloud;
 pub mod render;
 pub mod shape;
+pub mod train;
 
 pub use error::{CoreError, CoreResult};
 pub use graph::GraphTensor;

@@ -14,6 +14,7 @@ use physnap::export::{ExportOptions, export_dir, mesh_parts};
 use physnap::mesh::MeshingOptions;
 
 mod data_cmd;
+mod model_cmd;
 
 // mimalloc instead of glibc malloc: the ML stack allocates and frees many short-lived buffers
 // per step, and glibc's allocator roughly doubles backward-pass time (ml-stack.md §TL;DR).
@@ -38,11 +39,110 @@ enum Command {
     Export(ExportArgs),
     /// Draw objects to a PNG: one object at rest and at its joint limits, or a contact sheet.
     Render(RenderArgs),
+    /// Train the shape prior or the articulation denoiser.
+    Train {
+        #[command(subcommand)]
+        command: TrainCommand,
+    },
+    /// Generate articulated objects with trained weights (GLB + URDF per sample).
+    Generate(GenerateArgs),
     /// Data sets: procedural objects, PartNet-Mobility import, partial scans.
     Data {
         #[command(subcommand)]
         command: DataCommand,
     },
+}
+
+#[derive(Subcommand, Debug)]
+enum TrainCommand {
+    /// Train the part-shape auto-encoder on an imported data set; writes weights + codebook.
+    Shape(ShapeArgs),
+    /// Train the articulation denoiser; writes denoiser weights, the shape prior and manifest.json.
+    Diffusion(DiffusionArgs),
+}
+
+#[derive(Args, Debug)]
+struct ShapeArgs {
+    /// Imported data set (output of `physnap data import`).
+    #[arg(long, env = "PHYSNAP_DATA")]
+    data: PathBuf,
+    /// Output directory (shape_prior.safetensors, codebook.npy/json, shape_train.json).
+    #[arg(long, env = "PHYSNAP_OUT")]
+    out: PathBuf,
+    /// Optimiser steps.
+    #[arg(long, env = "PHYSNAP_TRAIN_STEPS", default_value_t = 3000)]
+    steps: usize,
+    /// Seed.
+    #[arg(long, env = "PHYSNAP_SEED", default_value_t = 0)]
+    seed: u64,
+    /// Parts per step (default: the trainer's).
+    #[arg(long, env = "PHYSNAP_SHAPE_BATCH_PARTS")]
+    batch_parts: Option<usize>,
+    /// Use at most this many training parts.
+    #[arg(long, env = "PHYSNAP_SHAPE_MAX_PARTS")]
+    max_parts: Option<usize>,
+}
+
+#[derive(Args, Debug)]
+struct DiffusionArgs {
+    /// Imported data set (output of `physnap data import`).
+    #[arg(long, env = "PHYSNAP_DATA")]
+    data: PathBuf,
+    /// Shape prior directory (output of `physnap train shape`: weights + codebook).
+    #[arg(long, env = "PHYSNAP_SHAPE")]
+    shape: PathBuf,
+    /// Output (weights) directory: denoiser.safetensors, shape_prior.safetensors, manifest.json.
+    #[arg(long, env = "PHYSNAP_OUT")]
+    out: PathBuf,
+    /// Optimiser steps.
+    #[arg(long, env = "PHYSNAP_TRAIN_STEPS", default_value_t = 20000)]
+    steps: usize,
+    /// Objects per step.
+    #[arg(long, env = "PHYSNAP_DIFFUSION_BATCH_OBJECTS", default_value_t = 32)]
+    batch_objects: usize,
+    /// Noise levels per object per step.
+    #[arg(long, env = "PHYSNAP_DIFFUSION_NOISE_LEVELS", default_value_t = 4)]
+    noise_levels: usize,
+    /// Adam learning rate.
+    #[arg(long, env = "PHYSNAP_DIFFUSION_LR", default_value_t = 2e-4)]
+    lr: f64,
+    /// Denoiser width.
+    #[arg(long, env = "PHYSNAP_DENOISER_WIDTH", default_value_t = 160)]
+    width: usize,
+    /// Denoiser graph layers.
+    #[arg(long, env = "PHYSNAP_DENOISER_LAYERS", default_value_t = 4)]
+    layers: usize,
+    /// Seed.
+    #[arg(long, env = "PHYSNAP_SEED", default_value_t = 12345)]
+    seed: u64,
+    /// Steps between checkpoints.
+    #[arg(long, env = "PHYSNAP_CHECKPOINT_EVERY", default_value_t = 1000)]
+    checkpoint_every: usize,
+    /// Continue from the checkpoint in --out.
+    #[arg(long, env = "PHYSNAP_RESUME")]
+    resume: bool,
+}
+
+#[derive(Args, Debug)]
+struct GenerateArgs {
+    /// Weights directory with manifest.json.
+    #[arg(long, env = "PHYSNAP_WEIGHTS", default_value = "weights")]
+    weights: PathBuf,
+    /// Category (e.g. StorageFurniture); omit for unconditional generation.
+    #[arg(long, env = "PHYSNAP_CATEGORY")]
+    category: Option<String>,
+    /// Number of samples.
+    #[arg(long, env = "PHYSNAP_SAMPLES", default_value_t = 1)]
+    samples: usize,
+    /// Seed of the first sample (sample i uses seed + i).
+    #[arg(long, env = "PHYSNAP_SEED", default_value_t = 0)]
+    seed: u64,
+    /// Output directory (one sample_NNN folder per sample).
+    #[arg(long, env = "PHYSNAP_OUT")]
+    out: PathBuf,
+    /// Marching-cubes grid cells per axis.
+    #[arg(long, env = "PHYSNAP_MC_RESOLUTION", default_value_t = physnap::mesh::DEFAULT_RESOLUTION)]
+    resolution: usize,
 }
 
 #[derive(Subcommand, Debug)]
@@ -197,6 +297,11 @@ fn run(command: Command) -> anyhow::Result<()> {
     match command {
         Command::Export(a) => export(a),
         Command::Render(a) => render(a),
+        Command::Train { command } => match command {
+            TrainCommand::Shape(a) => model_cmd::shape(a),
+            TrainCommand::Diffusion(a) => model_cmd::diffusion(a),
+        },
+        Command::Generate(a) => model_cmd::generate(a),
         Command::Data { command } => match command {
             DataCommand::Synth(a) => data_cmd::synth(a),
             DataCommand::Import(a) => data_cmd::import(a),

@@ -23,9 +23,11 @@ use super::{DiffusionArgs, GenerateArgs, ShapeArgs};
 fn bar(total: usize, what: &str) -> ProgressBar {
     let pb = ProgressBar::new(total as u64);
     pb.set_style(
-        ProgressStyle::with_template("{msg:>10} [{bar:40}] {pos}/{len} {per_sec} eta {eta} {prefix}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
+        ProgressStyle::with_template(
+            "{msg:>10} [{bar:40}] {pos}/{len} {per_sec} eta {eta} {prefix}",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .progress_chars("=> "),
     );
     pb.set_message(what.to_string());
     pb
@@ -54,7 +56,10 @@ pub fn shape(a: ShapeArgs) -> anyhow::Result<()> {
         report.wall_s,
         report.initial_loss,
         report.final_loss,
-        report.val_iou.map(|v| format!("{v:.3}")).unwrap_or_else(|| "n/a".into())
+        report
+            .val_iou
+            .map(|v| format!("{v:.3}"))
+            .unwrap_or_else(|| "n/a".into())
     );
     println!("weights and codebook: {}", a.out.display());
     Ok(())
@@ -86,17 +91,32 @@ pub fn diffusion(a: DiffusionArgs) -> anyhow::Result<()> {
     // Ship the shape prior next to the denoiser and describe both in the manifest.
     let shape_src = a.shape.join("shape_prior.safetensors");
     let shape_dst = a.out.join("shape_prior.safetensors");
-    std::fs::copy(&shape_src, &shape_dst).with_context(|| format!("copying {}", shape_src.display()))?;
+    std::fs::copy(&shape_src, &shape_dst)
+        .with_context(|| format!("copying {}", shape_src.display()))?;
     let shape_sha = sha256_hex(&std::fs::read(&shape_dst)?);
     let shape_cfg = read_model_config(&a.shape.join("shape_train.json"))?;
     let read = |p: &Path| -> serde_json::Value {
-        std::fs::read_to_string(p).ok().and_then(|t| serde_json::from_str(&t).ok()).unwrap_or(serde_json::Value::Null)
+        std::fs::read_to_string(p)
+            .ok()
+            .and_then(|t| serde_json::from_str(&t).ok())
+            .unwrap_or(serde_json::Value::Null)
     };
     let manifest = Manifest {
-        shape_prior: Entry { file: "shape_prior.safetensors".into(), sha256: shape_sha, config: shape_cfg },
-        denoiser: Entry { file: "denoiser.safetensors".into(), sha256: report.sha256.clone(), config: model },
+        shape_prior: Entry {
+            file: "shape_prior.safetensors".into(),
+            sha256: shape_sha,
+            config: shape_cfg,
+        },
+        denoiser: Entry {
+            file: "denoiser.safetensors".into(),
+            sha256: report.sha256.clone(),
+            config: model,
+        },
         feature_scales: data.scales.clone(),
-        categories: physnap::data::categories::CATEGORIES.iter().map(|s| s.to_string()).collect(),
+        categories: physnap::data::categories::CATEGORIES
+            .iter()
+            .map(|s| s.to_string())
+            .collect(),
         data: serde_json::json!({ "dataset": a.data.display().to_string(), "synth": read(&a.data.join("../synth/synth.json")) }),
         training: serde_json::json!({
             "shape": read(&a.shape.join("shape_train.json")),
@@ -128,9 +148,14 @@ pub fn generate(a: GenerateArgs) -> anyhow::Result<()> {
     let category = match &a.category {
         None => None,
         Some(c) => {
-            let idx = category_index(c).filter(|&i| i < models.manifest.categories.len()).with_context(|| {
-                format!("invalid --category {c:?} (must be one of: {})", models.manifest.categories.join(", "))
-            })?;
+            let idx = category_index(c)
+                .filter(|&i| i < models.manifest.categories.len())
+                .with_context(|| {
+                    format!(
+                        "invalid --category {c:?} (must be one of: {})",
+                        models.manifest.categories.join(", ")
+                    )
+                })?;
             if models.manifest.denoiser.config.categories == 0 {
                 bail!("invalid --category {c:?}: these weights are unconditional");
             }
@@ -145,18 +170,30 @@ pub fn generate(a: GenerateArgs) -> anyhow::Result<()> {
         samples: a.samples,
         category,
         category_name: category.map(|i| models.manifest.categories[i].clone()),
-        meshing: MeshingOptions { resolution: a.resolution },
+        meshing: MeshingOptions {
+            resolution: a.resolution,
+        },
     };
     req.meshing.validate()?;
     let schedule = Schedule::default();
     let pb = bar(a.samples * schedule.len(), "generate");
     let decoder = LatentSdfDecoder::new(&models.shape_prior.decoder);
-    let results = run_generate(&models.denoiser, &decoder, &models.manifest.feature_scales, &schedule, &req, &mut |e| {
-        pb.set_position((e.sample * e.step.total + e.step.step) as u64);
-        ControlFlow::Continue(())
-    })?;
+    let results = run_generate(
+        &models.denoiser,
+        &decoder,
+        &models.manifest.feature_scales,
+        &schedule,
+        &req,
+        &mut |e| {
+            pb.set_position((e.sample * e.step.total + e.step.step) as u64);
+            ControlFlow::Continue(())
+        },
+    )?;
     pb.finish_and_clear();
-    let opts = ExportOptions { meshing: req.meshing, ..Default::default() };
+    let opts = ExportOptions {
+        meshing: req.meshing,
+        ..Default::default()
+    };
     for g in &results {
         let dir = a.out.join(format!("sample_{:03}", g.index));
         export_dir(&g.object, &g.meshes, &dir, &opts)?;

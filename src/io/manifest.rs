@@ -166,13 +166,19 @@ pub fn to_string(m: &Manifest) -> String {
 /// Parse and check a manifest.
 pub fn from_str(text: &str, path: &str) -> Result<Manifest, FormatError> {
     let de = &mut serde_json::Deserializer::from_str(text);
-    let doc: ManifestDoc = serde_path_to_error::deserialize(de).map_err(|e| FormatError::Malformed {
-        what: "weights manifest",
-        path: format!("{path}: {}", e.path()),
-        message: e.into_inner().to_string(),
-    })?;
+    let doc: ManifestDoc =
+        serde_path_to_error::deserialize(de).map_err(|e| FormatError::Malformed {
+            what: "weights manifest",
+            path: format!("{path}: {}", e.path()),
+            message: e.into_inner().to_string(),
+        })?;
     if doc.format != FORMAT {
-        return Err(crate::error::CoreError::invalid("manifest format", format!("{FORMAT:?}"), format!("{:?}", doc.format)).into());
+        return Err(crate::error::CoreError::invalid(
+            "manifest format",
+            format!("{FORMAT:?}"),
+            format!("{:?}", doc.format),
+        )
+        .into());
     }
     let s = doc.shape_prior.config;
     let d = doc.denoiser.config;
@@ -217,7 +223,10 @@ pub fn from_str(text: &str, path: &str) -> Result<Manifest, FormatError> {
     if m.denoiser.config.categories != 0 && m.denoiser.config.categories != m.categories.len() {
         return Err(crate::error::CoreError::invalid(
             "manifest denoiser.config.categories",
-            format!("0 or the number of listed categories ({})", m.categories.len()),
+            format!(
+                "0 or the number of listed categories ({})",
+                m.categories.len()
+            ),
             m.denoiser.config.categories,
         )
         .into());
@@ -243,19 +252,32 @@ pub fn load_models(dir: &Path, device: &burn::tensor::Device) -> Result<LoadedMo
         source,
     })?;
     let manifest = from_str(&text, &path.display().to_string())?;
-    manifest.shape_prior.config.validate().map_err(|e| FormatError::Malformed {
-        what: "weights manifest",
-        path: format!("{}: shape_prior.config", path.display()),
-        message: e.to_string(),
-    })?;
+    manifest
+        .shape_prior
+        .config
+        .validate()
+        .map_err(|e| FormatError::Malformed {
+            what: "weights manifest",
+            path: format!("{}: shape_prior.config", path.display()),
+            message: e.to_string(),
+        })?;
     let mut shape_prior = ShapePrior::new(&manifest.shape_prior.config, device);
-    weights::load(&mut shape_prior, &dir.join(&manifest.shape_prior.file), Some(&manifest.shape_prior.sha256))?;
-    let mut denoiser = Denoiser::new(&manifest.denoiser.config, device).map_err(|e| FormatError::Malformed {
-        what: "weights manifest",
-        path: format!("{}: denoiser.config", path.display()),
-        message: e.to_string(),
-    })?;
-    weights::load(&mut denoiser, &dir.join(&manifest.denoiser.file), Some(&manifest.denoiser.sha256))?;
+    weights::load(
+        &mut shape_prior,
+        &dir.join(&manifest.shape_prior.file),
+        Some(&manifest.shape_prior.sha256),
+    )?;
+    let mut denoiser =
+        Denoiser::new(&manifest.denoiser.config, device).map_err(|e| FormatError::Malformed {
+            what: "weights manifest",
+            path: format!("{}: denoiser.config", path.display()),
+            message: e.to_string(),
+        })?;
+    weights::load(
+        &mut denoiser,
+        &dir.join(&manifest.denoiser.file),
+        Some(&manifest.denoiser.sha256),
+    )?;
     Ok(LoadedModels {
         manifest,
         shape_prior,

@@ -7,6 +7,7 @@
 //! `ThreadPool::install` (ml-stack.md §4).
 
 pub mod denoiser;
+pub mod shape_prior;
 
 use burn::tensor::Device;
 

@@ -27,8 +27,8 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use burn::module::AutodiffModule;
-use burn::optim::{AdamConfig, GradientsParams, Optimizer};
+use burn::module::Module;
+use burn::optim::{AdamConfig, GradientsParams};
 use burn::tensor::{Int, Tensor, TensorData};
 use serde_json::{Value, json};
 
@@ -36,7 +36,9 @@ use super::TrainError;
 use crate::data::categories::CATEGORIES;
 use crate::data::rng::Rng;
 use crate::engine::schedule::Schedule;
-use crate::graph::{EDGE_DIM, FeatureScales, GraphTensor, K, NODE_DIM, NUM_EDGES, edge_ch, node_ch};
+use crate::graph::{
+    EDGE_DIM, FeatureScales, GraphTensor, K, NODE_DIM, NUM_EDGES, edge_ch, node_ch,
+};
 use crate::io::npy;
 use crate::model::denoiser::{Denoiser, DenoiserConfig};
 use crate::model::{cpu_autodiff, weights};
@@ -115,19 +117,35 @@ fn read_json(path: &Path) -> Result<Value, TrainError> {
 /// (`shape/codebook.npy` + `shape/codebook.json`).
 pub fn load_data(data: &Path, shape: &Path) -> Result<DiffusionData, TrainError> {
     let index = read_json(&data.join("dataset.json"))?;
-    let (rows, cols, codes) = npy::read(&shape.join("codebook.npy")).map_err(|e| data_err(&shape.join("codebook.npy"), e.to_string()))?;
+    let (rows, cols, codes) = npy::read(&shape.join("codebook.npy"))
+        .map_err(|e| data_err(&shape.join("codebook.npy"), e.to_string()))?;
     if cols != crate::object::LATENT_DIM {
-        return Err(data_err(&shape.join("codebook.npy"), format!("codes have {cols} dimensions, expected {}", crate::object::LATENT_DIM)));
+        return Err(data_err(
+            &shape.join("codebook.npy"),
+            format!(
+                "codes have {cols} dimensions, expected {}",
+                crate::object::LATENT_DIM
+            ),
+        ));
     }
     let keys = read_json(&shape.join("codebook.json"))?;
     let keys: Vec<String> = keys["keys"]
         .as_array()
         .ok_or_else(|| data_err(&shape.join("codebook.json"), "no \"keys\" list"))?
         .iter()
-        .map(|k| k["key"].as_str().or(k.as_str()).unwrap_or_default().to_string())
+        .map(|k| {
+            k["key"]
+                .as_str()
+                .or(k.as_str())
+                .unwrap_or_default()
+                .to_string()
+        })
         .collect();
     if keys.len() != rows {
-        return Err(data_err(&shape.join("codebook.json"), format!("{} keys for {rows} codes", keys.len())));
+        return Err(data_err(
+            &shape.join("codebook.json"),
+            format!("{} keys for {rows} codes", keys.len()),
+        ));
     }
     let code_of: std::collections::HashMap<&str, &[f32]> = keys
         .iter()
@@ -149,9 +167,12 @@ pub fn load_data(data: &Path, shape: &Path) -> Result<DiffusionData, TrainError>
                 continue;
             }
             let key = format!("{id}_{k}");
-            let code = code_of
-                .get(key.as_str())
-                .ok_or_else(|| data_err(&shape.join("codebook.json"), format!("no code for part {key}")))?;
+            let code = code_of.get(key.as_str()).ok_or_else(|| {
+                data_err(
+                    &shape.join("codebook.json"),
+                    format!("no code for part {key}"),
+                )
+            })?;
             g.node_mut(k)[node_ch::LATENT..].copy_from_slice(code);
         }
         graphs.push(g);
@@ -161,11 +182,20 @@ pub fn load_data(data: &Path, shape: &Path) -> Result<DiffusionData, TrainError>
         return Err(data_err(&data.join("dataset.json"), "no training objects"));
     }
     let scales = FeatureScales::fit(&graphs, codes.chunks_exact(cols));
-    Ok(DiffusionData { graphs, categories, scales })
+    Ok(DiffusionData {
+        graphs,
+        categories,
+        scales,
+    })
 }
 
 /// NAP's grouped loss on (prediction, target) pairs, per sample, averaged over the batch.
-pub fn grouped_loss(pred_v: Tensor<3>, pred_e: Tensor<3>, eps_v: Tensor<3>, eps_e: Tensor<3>) -> Tensor<1> {
+pub fn grouped_loss(
+    pred_v: Tensor<3>,
+    pred_e: Tensor<3>,
+    eps_v: Tensor<3>,
+    eps_e: Tensor<3>,
+) -> Tensor<1> {
     let ev = (pred_v - eps_v).powi_scalar(2).mean_dim(1); // [B, 1, 135]
     let ee = (pred_e - eps_e).powi_scalar(2).mean_dim(1); // [B, 1, 13]
     let group = |x: &Tensor<3>, a: usize, b: usize| x.clone().narrow(2, a, b - a).mean_dim(2);
@@ -211,13 +241,37 @@ pub fn train_diffusion(
     cfg.model.validate()?;
     for (field, ok, limit, value) in [
         ("steps", cfg.steps >= 1, "at least 1", cfg.steps.to_string()),
-        ("batch_objects", cfg.batch_objects >= 1, "at least 1", cfg.batch_objects.to_string()),
-        ("noise_levels", cfg.noise_levels >= 1, "at least 1", cfg.noise_levels.to_string()),
-        ("lr", cfg.lr > 0.0 && cfg.lr.is_finite(), "> 0", cfg.lr.to_string()),
-        ("category_dropout", (0.0..=1.0).contains(&cfg.category_dropout), "within [0, 1]", cfg.category_dropout.to_string()),
+        (
+            "batch_objects",
+            cfg.batch_objects >= 1,
+            "at least 1",
+            cfg.batch_objects.to_string(),
+        ),
+        (
+            "noise_levels",
+            cfg.noise_levels >= 1,
+            "at least 1",
+            cfg.noise_levels.to_string(),
+        ),
+        (
+            "lr",
+            cfg.lr > 0.0 && cfg.lr.is_finite(),
+            "> 0",
+            cfg.lr.to_string(),
+        ),
+        (
+            "category_dropout",
+            (0.0..=1.0).contains(&cfg.category_dropout),
+            "within [0, 1]",
+            cfg.category_dropout.to_string(),
+        ),
     ] {
         if !ok {
-            return Err(TrainError::Config { field: field.into(), limit: limit.into(), value });
+            return Err(TrainError::Config {
+                field: field.into(),
+                limit: limit.into(),
+                value,
+            });
         }
     }
     std::fs::create_dir_all(out).map_err(|e| data_err(out, e.to_string()))?;
@@ -249,7 +303,10 @@ pub fn train_diffusion(
             for i in (1..K).rev() {
                 perm.swap(i, rng.int(0, i));
             }
-            let g = data.graphs[k].permuted(&perm).map_err(TrainError::Core)?.scaled(&data.scales);
+            let g = data.graphs[k]
+                .permuted(&perm)
+                .map_err(TrainError::Core)?
+                .scaled(&data.scales);
             for _ in 0..cfg.noise_levels {
                 x0.push(g.clone());
                 ts.push(rng.int(0, schedule.len() - 1));
@@ -261,8 +318,17 @@ pub fn train_diffusion(
             }
         }
         let (v0, e0) = crate::engine::to_tensors(&x0, &device);
-        let eps_v = Tensor::<3>::from_data(TensorData::new(randn(&mut rng, bsz * K * NODE_DIM), [bsz, K, NODE_DIM]), &device);
-        let eps_e = Tensor::<3>::from_data(TensorData::new(randn(&mut rng, bsz * NUM_EDGES * EDGE_DIM), [bsz, NUM_EDGES, EDGE_DIM]), &device);
+        let eps_v = Tensor::<3>::from_data(
+            TensorData::new(randn(&mut rng, bsz * K * NODE_DIM), [bsz, K, NODE_DIM]),
+            &device,
+        );
+        let eps_e = Tensor::<3>::from_data(
+            TensorData::new(
+                randn(&mut rng, bsz * NUM_EDGES * EDGE_DIM),
+                [bsz, NUM_EDGES, EDGE_DIM],
+            ),
+            &device,
+        );
         let (sa, sb): (Vec<f32>, Vec<f32>) = ts
             .iter()
             .map(|&t| {
@@ -274,19 +340,34 @@ pub fn train_diffusion(
         let sb = Tensor::<3>::from_data(TensorData::new(sb, [bsz, 1, 1]), &device);
         let vt = v0 * sa.clone() + eps_v.clone() * sb.clone();
         let et = e0 * sa + eps_e.clone() * sb;
-        let t = Tensor::<1, Int>::from_data(TensorData::new(ts.iter().map(|&t| t as i64).collect::<Vec<_>>(), [bsz]), &device);
+        let t = Tensor::<1, Int>::from_data(
+            TensorData::new(ts.iter().map(|&t| t as i64).collect::<Vec<_>>(), [bsz]),
+            &device,
+        );
         let category = (no_category > 0).then(|| {
-            Tensor::<1, Int>::from_data(TensorData::new(cats.iter().map(|&c| c as i64).collect::<Vec<_>>(), [bsz]), &device)
+            Tensor::<1, Int>::from_data(
+                TensorData::new(cats.iter().map(|&c| c as i64).collect::<Vec<_>>(), [bsz]),
+                &device,
+            )
         });
         let (pv, pe) = model.forward(vt, et, t, category);
         let loss = grouped_loss(pv, pe, eps_v, eps_e);
-        let value: f64 = loss.clone().into_data().try_to_vec::<f32>().map(|v| v[0] as f64).unwrap_or(f64::NAN);
+        let value: f64 = loss
+            .clone()
+            .into_data()
+            .try_to_vec::<f32>()
+            .map(|v| v[0] as f64)
+            .unwrap_or(f64::NAN);
         if !value.is_finite() {
             return Err(TrainError::Diverged { step, loss: value });
         }
         let grads = GradientsParams::from_grads(loss.backward(), &model);
         model = optim.step(cfg.lr, model, grads);
-        ema = if ema.is_nan() { value } else { 0.99 * ema + 0.01 * value };
+        ema = if ema.is_nan() {
+            value
+        } else {
+            0.99 * ema + 0.01 * value
+        };
         progress(&DiffusionProgress {
             step: step + 1,
             total: cfg.steps,
@@ -297,12 +378,15 @@ pub fn train_diffusion(
         if (step + 1) % cfg.checkpoint_every == 0 || step + 1 == cfg.steps {
             sha = weights::save(&model.valid(), &weights_path)?;
             let ck = json!({ "step": step + 1, "sha256": sha, "loss_ema": ema });
-            std::fs::write(&ckpt_path, ck.to_string()).map_err(|e| data_err(&ckpt_path, e.to_string()))?;
+            std::fs::write(&ckpt_path, ck.to_string())
+                .map_err(|e| data_err(&ckpt_path, e.to_string()))?;
         }
     }
     if sha.is_empty() {
         // Resumed a finished run: nothing trained, report the existing weights.
-        sha = weights::sha256_hex(&std::fs::read(&weights_path).map_err(|e| data_err(&weights_path, e.to_string()))?);
+        sha = weights::sha256_hex(
+            &std::fs::read(&weights_path).map_err(|e| data_err(&weights_path, e.to_string()))?,
+        );
     }
     let wall = t0.elapsed().as_secs_f64();
     let summary = json!({
@@ -313,7 +397,11 @@ pub fn train_diffusion(
         "categories": CATEGORIES.to_vec(), "train_objects": data.graphs.len(), "sha256": sha,
     });
     let path = out.join("diffusion_train.json");
-    std::fs::write(&path, serde_json::to_string_pretty(&summary).unwrap_or_default()).map_err(|e| data_err(&path, e.to_string()))?;
+    std::fs::write(
+        &path,
+        serde_json::to_string_pretty(&summary).unwrap_or_default(),
+    )
+    .map_err(|e| data_err(&path, e.to_string()))?;
     Ok(DiffusionTrainReport {
         steps: cfg.steps,
         wall_seconds: wall,
@@ -321,4 +409,104 @@ pub fn train_diffusion(
         weights: weights_path,
         sha256: sha,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tiny_data() -> DiffusionData {
+        let mut rng = Rng::new(3);
+        let mut graphs = Vec::new();
+        let mut categories = Vec::new();
+        for (k, obj) in [
+            crate::fixtures::cabinet(),
+            crate::fixtures::eight_part().merge_fixed().unwrap().0,
+        ]
+        .iter()
+        .enumerate()
+        {
+            let slots: Vec<usize> = (0..obj.parts.len()).collect();
+            let mut g = crate::graph::encode(obj, &slots).unwrap();
+            for s in 0..obj.parts.len() {
+                for v in &mut g.node_mut(s)[node_ch::LATENT..] {
+                    *v = rng.gauss() as f32 * 0.1;
+                }
+            }
+            graphs.push(g);
+            categories.push(k);
+        }
+        let scales = FeatureScales::fit(
+            &graphs,
+            graphs
+                .iter()
+                .flat_map(|g| (0..K).map(move |i| &g.node(i)[node_ch::LATENT..])),
+        );
+        DiffusionData {
+            graphs,
+            categories,
+            scales,
+        }
+    }
+
+    fn tiny_config(steps: usize) -> DiffusionTrainConfig {
+        DiffusionTrainConfig {
+            model: DenoiserConfig {
+                width: 32,
+                layers: 1,
+                head_channels: 8,
+                node_head_hidden: vec![32],
+                edge_head_hidden: vec![32],
+                categories: 3,
+                ..DenoiserConfig::default()
+            },
+            steps,
+            batch_objects: 4,
+            noise_levels: 2,
+            lr: 2e-3,
+            seed: 1,
+            category_dropout: 0.2,
+            checkpoint_every: 20,
+        }
+    }
+
+    #[test]
+    fn tiny_training_lowers_the_loss_and_resumes_exactly() {
+        let data = tiny_data();
+        let dir = tempfile::tempdir().unwrap();
+        let mut losses = Vec::new();
+        let report = train_diffusion(&data, &tiny_config(60), dir.path(), false, &mut |p| {
+            losses.push(p.loss)
+        })
+        .unwrap();
+        let first: f64 = losses[..10].iter().sum::<f64>() / 10.0;
+        let last: f64 = losses[50..].iter().sum::<f64>() / 10.0;
+        assert!(last < 0.8 * first, "loss did not fall: {first} -> {last}");
+        assert!(report.weights.is_file() && dir.path().join("checkpoint.json").is_file());
+        // Resume: a run to 80 steps continues from step 60.
+        let mut steps = Vec::new();
+        train_diffusion(&data, &tiny_config(80), dir.path(), true, &mut |p| {
+            steps.push(p.step)
+        })
+        .unwrap();
+        assert_eq!(steps.first(), Some(&61));
+        assert_eq!(steps.last(), Some(&80));
+    }
+
+    #[test]
+    fn bad_config_values_are_named() {
+        let mut cfg = tiny_config(10);
+        cfg.category_dropout = 1.5;
+        let e = train_diffusion(
+            &tiny_data(),
+            &cfg,
+            tempfile::tempdir().unwrap().path(),
+            false,
+            &mut |_| {},
+        )
+        .err()
+        .unwrap()
+        .to_string();
+        assert!(e.contains("category_dropout") && e.contains("1.5"), "{e}");
+    }
 }

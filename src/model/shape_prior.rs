@@ -1,0 +1,641 @@
+//! NAP's part-shape auto-encoder (method.md §4): a ResNet-PointNet encoder turns a part's surface
+//! points into a latent code z; an OccNet-style residual MLP decodes (query, z) into the part's
+//! SDF in its normalised frame (negative inside).
+//!
+//! Why it exists: the diffusion prior generates shape *codes*; this decoder turns them back into
+//! geometry for meshing ([`LatentSdfDecoder`] implements [`LatentDecoder`]) and for PhysNAP's
+//! guidance losses, which need d SDF / d point and d SDF / d code. [`ShapeDecoder::sdf`] therefore
+//! takes every part and point of a step in one call ([P, N, 3] points, [P, F] codes) and is
+//! differentiable in both inputs.
+//!
+//! Widths are configurable: [`ShapePriorConfig::nap`] is the paper's network (decoder 704,513
+//! parameters, encoder 6,628,480), [`ShapePriorConfig::default`] a smaller one that trains on a
+//! 2-core CPU in about an hour. Weights are initialised from our own seeded [`Rng`]
+//! (PyTorch's default `nn.Linear` init, zeros for each residual block's second weight as in
+//! OccNet), so a model is a pure function of (config, seed), independent of burn's global RNG.
+//!
+//! Thread safety: burn 0.22 tensors and modules are `Send + Sync` (checked at compile time
+//! below), so the mesher can call one decoder from several rayon workers without a lock.
+
+use burn::module::{Module, Param};
+use burn::nn::Linear;
+use burn::tensor::activation::{leaky_relu, relu};
+use burn::tensor::{Device, Tensor, TensorData};
+
+use super::ModelError;
+use crate::data::rng::Rng;
+use crate::shape::{LatentDecoder, Sdf};
+
+/// Sizes of the shape auto-encoder.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ShapePriorConfig {
+    /// Latent code width F (NAP: 128).
+    pub latent: usize,
+    /// Decoder width (NAP: 256).
+    pub decoder_hidden: usize,
+    /// Decoder residual blocks (NAP: 5).
+    pub decoder_blocks: usize,
+    /// Encoder width H; the first per-point layer is 2H wide (NAP: 512, first layer 1024).
+    pub encoder_hidden: usize,
+    /// Encoder residual blocks, the first without max-pool concatenation (NAP: 5).
+    pub encoder_blocks: usize,
+    /// Positional-encoding octaves N_pe (NAP: 8), γ(q) has 3 + 6·N_pe channels.
+    pub pe_freqs: usize,
+}
+
+impl Default for ShapePriorConfig {
+    /// The CPU default: decoder 128 × 4 blocks, encoder 128 × 4 blocks, F = 128.
+    fn default() -> Self {
+        ShapePriorConfig {
+            latent: 128,
+            decoder_hidden: 128,
+            decoder_blocks: 4,
+            encoder_hidden: 128,
+            encoder_blocks: 4,
+            pe_freqs: 8,
+        }
+    }
+}
+
+/// Largest accepted width (latent, hidden).
+pub const MAX_WIDTH: usize = 4096;
+/// Largest accepted number of residual blocks.
+pub const MAX_BLOCKS: usize = 32;
+/// Largest accepted number of positional-encoding octaves (2^15 is still exact in f32).
+pub const MAX_PE_FREQS: usize = 16;
+
+impl ShapePriorConfig {
+    /// NAP's sizes (method.md §4.2–4.3).
+    pub fn nap() -> Self {
+        ShapePriorConfig {
+            latent: 128,
+            decoder_hidden: 256,
+            decoder_blocks: 5,
+            encoder_hidden: 512,
+            encoder_blocks: 5,
+            pe_freqs: 8,
+        }
+    }
+
+    /// Width of γ(q): 3 + 6·N_pe (51 for N_pe = 8).
+    pub fn pe_dim(&self) -> usize {
+        3 + 6 * self.pe_freqs
+    }
+
+    /// Check every size against its range.
+    pub fn validate(&self) -> Result<(), ModelError> {
+        let check = |field: &str, value: usize, lo: usize, hi: usize| {
+            if (lo..=hi).contains(&value) {
+                Ok(())
+            } else {
+                Err(ModelError::Config {
+                    field: field.into(),
+                    limit: format!("between {lo} and {hi}"),
+                    value: value.to_string(),
+                })
+            }
+        };
+        check("latent", self.latent, 1, MAX_WIDTH)?;
+        check("decoder_hidden", self.decoder_hidden, 1, MAX_WIDTH)?;
+        check("decoder_blocks", self.decoder_blocks, 0, MAX_BLOCKS)?;
+        check("encoder_hidden", self.encoder_hidden, 1, MAX_WIDTH)?;
+        check("encoder_blocks", self.encoder_blocks, 1, MAX_BLOCKS)?;
+        check("pe_freqs", self.pe_freqs, 0, MAX_PE_FREQS)
+    }
+}
+
+/// A linear layer with PyTorch's default init, U(−1/√fan_in, 1/√fan_in) for weight and bias,
+/// drawn from `rng`; `zero_weight` zeroes the weight (bias stays random, as OccNet does).
+fn linear(
+    d_in: usize,
+    d_out: usize,
+    bias: bool,
+    zero_weight: bool,
+    rng: &mut Rng,
+    device: &Device,
+) -> Linear {
+    let bound = 1.0 / (d_in as f64).sqrt();
+    let mut draw = |n: usize| -> Vec<f32> {
+        (0..n)
+            .map(|_| rng.range(-bound, bound) as f32)
+            .collect::<Vec<_>>()
+    };
+    let w = if zero_weight {
+        vec![0.0f32; d_in * d_out]
+    } else {
+        draw(d_in * d_out)
+    };
+    let weight = Param::from_data(TensorData::new(w, [d_in, d_out]), device);
+    let bias = bias.then(|| Param::from_data(TensorData::new(draw(d_out), [d_out]), device));
+    Linear { weight, bias }
+}
+
+/// γ(q) (method.md §4.1) of `q` = [M, 3]: [x, y, z, cos(2^f x)…, cos(2^f z)…, sin(2^f x)…],
+/// coordinate-major within each block, frequencies 2^f (f = 0 … N_pe − 1), no π. → [M, 3 + 6 N_pe].
+pub fn positional_encoding(q: Tensor<2>, pe_freqs: usize) -> Tensor<2> {
+    if pe_freqs == 0 {
+        return q;
+    }
+    let [m, _] = q.dims();
+    let freqs: Vec<f32> = (0..pe_freqs).map(|f| (1u64 << f) as f32).collect();
+    let freqs = Tensor::<3>::from_data(TensorData::new(freqs, [1, 1, pe_freqs]), &q.device());
+    let scaled = (q.clone().unsqueeze_dim::<3>(2) * freqs).reshape([m, 3 * pe_freqs]);
+    Tensor::cat(vec![q, scaled.clone().cos(), scaled.sin()], 1)
+}
+
+/// OccNet's `ResnetBlockFC`: x_s + fc_1(ReLU(fc_0(ReLU(x)))), x_s = x or a bias-free linear
+/// shortcut when the width changes.
+#[derive(Module, Debug)]
+pub struct ResBlock {
+    /// First linear (size_in → size_h).
+    pub fc_0: Linear,
+    /// Second linear (size_h → size_out), zero-initialised weight.
+    pub fc_1: Linear,
+    /// Bias-free shortcut when size_in ≠ size_out.
+    pub shortcut: Option<Linear>,
+}
+
+impl ResBlock {
+    fn new(size_in: usize, size_out: usize, rng: &mut Rng, device: &Device) -> Self {
+        let size_h = size_in.min(size_out);
+        ResBlock {
+            fc_0: linear(size_in, size_h, true, false, rng, device),
+            fc_1: linear(size_h, size_out, true, true, rng, device),
+            shortcut: (size_in != size_out)
+                .then(|| linear(size_in, size_out, false, false, rng, device)),
+        }
+    }
+
+    /// Apply to [M, size_in] → [M, size_out].
+    pub fn forward(&self, x: Tensor<2>) -> Tensor<2> {
+        let dx = self.fc_1.forward(relu(self.fc_0.forward(relu(x.clone()))));
+        match &self.shortcut {
+            Some(s) => s.forward(x) + dx,
+            None => x + dx,
+        }
+    }
+}
+
+/// The SDF decoder (method.md §4.2).
+#[derive(Module, Debug)]
+pub struct ShapeDecoder {
+    /// W_p: γ(q) → hidden.
+    pub fc_p: Linear,
+    /// W_c: code → hidden (conditioning by addition at the input).
+    pub fc_c: Linear,
+    /// Residual blocks (hidden → hidden, ReLU inside).
+    pub blocks: Vec<ResBlock>,
+    /// Output hidden → 1 after LeakyReLU(0.2).
+    pub fc_out: Linear,
+    /// N_pe.
+    pub pe_freqs: usize,
+}
+
+impl ShapeDecoder {
+    /// A freshly initialised decoder.
+    pub fn new(cfg: &ShapePriorConfig, rng: &mut Rng, device: &Device) -> Self {
+        let h = cfg.decoder_hidden;
+        ShapeDecoder {
+            fc_p: linear(cfg.pe_dim(), h, true, false, rng, device),
+            fc_c: linear(cfg.latent, h, true, false, rng, device),
+            blocks: (0..cfg.decoder_blocks)
+                .map(|_| ResBlock::new(h, h, rng, device))
+                .collect(),
+            fc_out: linear(h, 1, true, false, rng, device),
+            pe_freqs: cfg.pe_freqs,
+        }
+    }
+
+    /// W_c z + b_c per part: [P, F] → [P, hidden]. Compute once per code and reuse with
+    /// [`ShapeDecoder::sdf_with_features`].
+    pub fn code_features(&self, codes: Tensor<2>) -> Tensor<2> {
+        self.fc_c.forward(codes)
+    }
+
+    /// SDF of `points` [P, N, 3] (normalised part frame) for parts whose code features
+    /// (from [`ShapeDecoder::code_features`]) are `features` [P, hidden] → [P, N].
+    pub fn sdf_with_features(&self, points: Tensor<3>, features: Tensor<2>) -> Tensor<2> {
+        let [p, n, _] = points.dims();
+        let hidden = features.dims()[1];
+        let pe = positional_encoding(points.reshape([p * n, 3]), self.pe_freqs);
+        let h = self.fc_p.forward(pe).reshape([p, n, hidden]) + features.unsqueeze_dim::<3>(1);
+        let mut h = h.reshape([p * n, hidden]);
+        for block in &self.blocks {
+            h = block.forward(h);
+        }
+        self.fc_out.forward(leaky_relu(h, 0.2)).reshape([p, n])
+    }
+
+    /// SDF (negative inside) of `points` [P, N, 3] in the normalised frame of part p with code
+    /// `codes[p]` ([P, F]) → [P, N]. Differentiable in points and codes; W_c z is computed once
+    /// per part and broadcast over its points.
+    pub fn sdf(&self, points: Tensor<3>, codes: Tensor<2>) -> Tensor<2> {
+        self.sdf_with_features(points, self.code_features(codes))
+    }
+
+    /// Hidden width.
+    pub fn hidden(&self) -> usize {
+        self.fc_p.weight.shape().dims::<2>()[1]
+    }
+
+    /// Latent width F.
+    pub fn latent(&self) -> usize {
+        self.fc_c.weight.shape().dims::<2>()[0]
+    }
+}
+
+/// The point encoder ("ResnetPointnet", method.md §4.3).
+#[derive(Module, Debug)]
+pub struct ShapeEncoder {
+    /// Per-point 3 → 2H.
+    pub fc_pos: Linear,
+    /// block_0: 2H → H; block_k (k ≥ 1): [feature, max-pool] 2H → H.
+    pub blocks: Vec<ResBlock>,
+    /// H → F after ReLU of the final max-pool.
+    pub fc_c: Linear,
+}
+
+impl ShapeEncoder {
+    /// A freshly initialised encoder.
+    pub fn new(cfg: &ShapePriorConfig, rng: &mut Rng, device: &Device) -> Self {
+        let h = cfg.encoder_hidden;
+        ShapeEncoder {
+            fc_pos: linear(3, 2 * h, true, false, rng, device),
+            blocks: (0..cfg.encoder_blocks)
+                .map(|_| ResBlock::new(2 * h, h, rng, device))
+                .collect(),
+            fc_c: linear(h, cfg.latent, true, false, rng, device),
+        }
+    }
+
+    /// Codes of parts from their surface points [P, S, 3] (normalised frame) → [P, F].
+    pub fn encode(&self, surface: Tensor<3>) -> Tensor<2> {
+        let [p, s, _] = surface.dims();
+        let mut net = self.fc_pos.forward(surface.reshape([p * s, 3]));
+        for (k, block) in self.blocks.iter().enumerate() {
+            if k > 0 {
+                let h = net.dims()[1];
+                let per_point = net.reshape([p, s, h]);
+                let pooled = per_point.clone().max_dim(1).expand([p, s, h]);
+                net = Tensor::cat(vec![per_point, pooled], 2).reshape([p * s, 2 * h]);
+            }
+            net = block.forward(net);
+        }
+        let h = net.dims()[1];
+        let pooled = net.reshape([p, s, h]).max_dim(1).reshape([p, h]);
+        self.fc_c.forward(relu(pooled))
+    }
+}
+
+/// The part-shape auto-encoder.
+#[derive(Module, Debug)]
+pub struct ShapePrior {
+    /// Surface points → code.
+    pub encoder: ShapeEncoder,
+    /// (query, code) → SDF.
+    pub decoder: ShapeDecoder,
+}
+
+impl ShapePrior {
+    /// A model initialised from seed 0 (see [`ShapePrior::with_seed`]).
+    pub fn new(cfg: &ShapePriorConfig, device: &Device) -> Self {
+        Self::with_seed(cfg, 0, device)
+    }
+
+    /// A model initialised from `seed` (deterministic, independent of burn's RNG). Panics on an
+    /// invalid config; call [`ShapePriorConfig::validate`] first for untrusted sizes.
+    pub fn with_seed(cfg: &ShapePriorConfig, seed: u64, device: &Device) -> Self {
+        if let Err(e) = cfg.validate() {
+            panic!("{e}");
+        }
+        let mut rng = Rng::fork(seed, 0x0053_4841_5045);
+        let encoder = ShapeEncoder::new(cfg, &mut rng, device);
+        let decoder = ShapeDecoder::new(cfg, &mut rng, device);
+        ShapePrior { encoder, decoder }
+    }
+}
+
+/// Points per decoder call when meshing (bounds the activations: ~hidden × 4 B × this × a few).
+pub const MESH_CHUNK: usize = 1 << 16;
+
+/// A (non-autodiff) decoder as a [`LatentDecoder`], so `mesh::part_mesh` can mesh latent parts.
+///
+/// Each [`Sdf::eval_batch`] call is one decoder call per [`MESH_CHUNK`] points. Safe to share
+/// across threads (the mesher evaluates z-slabs in parallel); burn modules are `Sync`.
+#[derive(Debug, Clone)]
+pub struct LatentSdfDecoder {
+    decoder: ShapeDecoder,
+}
+
+impl LatentSdfDecoder {
+    /// Wrap `decoder`; it is put into inference mode ([`Module::valid`], no autodiff graph).
+    pub fn new(decoder: &ShapeDecoder) -> Self {
+        LatentSdfDecoder {
+            decoder: decoder.valid(),
+        }
+    }
+
+    /// The wrapped decoder.
+    pub fn decoder(&self) -> &ShapeDecoder {
+        &self.decoder
+    }
+}
+
+/// The SDF of one code: the code features are computed once, points are decoded in chunks.
+struct CodeSdf<'a> {
+    decoder: &'a ShapeDecoder,
+    /// [1, hidden], or `None` when the code had the wrong length (SDF = NaN: meshes empty).
+    features: Option<Tensor<2>>,
+}
+
+impl Sdf for CodeSdf<'_> {
+    fn eval_batch(&self, points: &[[f32; 3]], out: &mut [f32]) {
+        let Some(features) = &self.features else {
+            out.fill(f32::NAN);
+            return;
+        };
+        let device = features.device();
+        for (pts, o) in points.chunks(MESH_CHUNK).zip(out.chunks_mut(MESH_CHUNK)) {
+            let flat: Vec<f32> = pts.iter().flatten().copied().collect();
+            let t = Tensor::<3>::from_data(TensorData::new(flat, [1, pts.len(), 3]), &device);
+            let v = self
+                .decoder
+                .sdf_with_features(t, features.clone())
+                .into_data()
+                .try_into_vec::<f32>();
+            match v {
+                Ok(v) => o.copy_from_slice(&v),
+                Err(_) => o.fill(f32::NAN),
+            }
+        }
+    }
+}
+
+impl LatentDecoder for LatentSdfDecoder {
+    /// A code of the wrong length gives an SDF that is NaN everywhere (the mesher treats that as
+    /// outside, so the part meshes empty) and logs a warning.
+    fn sdf<'a>(&'a self, code: &'a [f32]) -> Box<dyn Sdf + 'a> {
+        let latent = self.decoder.latent();
+        let features = if code.len() == latent {
+            let device = self.decoder.fc_c.weight.val().device();
+            let z = Tensor::<2>::from_data(TensorData::new(code.to_vec(), [1, latent]), &device);
+            Some(self.decoder.code_features(z))
+        } else {
+            tracing::warn!(
+                expected = latent,
+                got = code.len(),
+                "latent code has the wrong length"
+            );
+            None
+        };
+        Box::new(CodeSdf {
+            decoder: &self.decoder,
+            features,
+        })
+    }
+}
+
+// The mesher needs `Sdf: Sync`; fail the build, not a run, if burn ever changes this.
+const _: () = {
+    const fn assert_sync<T: Sync + Send>() {}
+    assert_sync::<ShapeDecoder>();
+    assert_sync::<Tensor<2>>();
+};
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{cpu, cpu_autodiff};
+
+    fn tiny() -> ShapePriorConfig {
+        ShapePriorConfig {
+            latent: 8,
+            decoder_hidden: 16,
+            decoder_blocks: 2,
+            encoder_hidden: 16,
+            encoder_blocks: 2,
+            pe_freqs: 8,
+        }
+    }
+
+    fn to_vec<const D: usize>(t: Tensor<D>) -> Vec<f32> {
+        t.into_data().try_into_vec::<f32>().unwrap()
+    }
+
+    #[test]
+    fn nap_parameter_counts_match_the_paper() {
+        let cfg = ShapePriorConfig::nap();
+        let mut rng = Rng::new(0);
+        let device = cpu();
+        assert_eq!(
+            ShapeDecoder::new(&cfg, &mut rng, &device).num_params(),
+            704_513
+        );
+        assert_eq!(
+            ShapeEncoder::new(&cfg, &mut rng, &device).num_params(),
+            6_628_480
+        );
+        assert_eq!(cfg.pe_dim(), 51);
+    }
+
+    #[test]
+    fn positional_encoding_layout_and_values() {
+        let device = cpu();
+        let q = Tensor::<2>::from_data(TensorData::new(vec![0.1f32, -0.2, 0.3], [1, 3]), &device);
+        let g = to_vec(positional_encoding(q, 8));
+        assert_eq!(g.len(), 51);
+        let p = [0.1f64, -0.2, 0.3];
+        let mut want = p.to_vec();
+        for f in [f64::cos, f64::sin] {
+            for c in p {
+                for k in 0..8 {
+                    want.push(f(c * (1u64 << k) as f64));
+                }
+            }
+        }
+        for (i, (a, b)) in g.iter().zip(&want).enumerate() {
+            assert!((*a as f64 - b).abs() < 1e-5, "γ[{i}] = {a}, want {b}");
+        }
+        // Spot checks of the layout: cos(2^7 y) at 3 + 8 + 7, sin(2^0 x) at 3 + 24.
+        assert!((g[18] as f64 - (-0.2f64 * 128.0).cos()).abs() < 1e-5);
+        assert!((g[27] as f64 - 0.1f64.sin()).abs() < 1e-6);
+    }
+
+    #[test]
+    fn decoder_and_encoder_shapes() {
+        let device = cpu();
+        let cfg = tiny();
+        let model = ShapePrior::with_seed(&cfg, 3, &device);
+        let surface = Tensor::<3>::random(
+            [3, 10, 3],
+            burn::tensor::Distribution::Uniform(-0.5, 0.5),
+            &device,
+        );
+        let z = model.encoder.encode(surface);
+        assert_eq!(z.dims(), [3, 8]);
+        let pts = Tensor::<3>::zeros([3, 7, 3], &device);
+        assert_eq!(model.decoder.sdf(pts, z).dims(), [3, 7]);
+    }
+
+    #[test]
+    fn config_errors_name_field_limit_value() {
+        let cfg = ShapePriorConfig {
+            decoder_hidden: 0,
+            ..ShapePriorConfig::default()
+        };
+        let e = cfg.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("decoder_hidden") && e.contains("between 1 and 4096") && e.contains(": 0"),
+            "{e}"
+        );
+        let cfg = ShapePriorConfig {
+            pe_freqs: 17,
+            ..ShapePriorConfig::default()
+        };
+        assert!(cfg.validate().unwrap_err().to_string().contains("17"));
+    }
+
+    /// Randomise every parameter (the residual blocks' zero init would hide their gradients).
+    fn randomised(decoder: ShapeDecoder, seed: u64) -> ShapeDecoder {
+        struct Mapper(Rng);
+        impl burn::module::ModuleMapper for Mapper {
+            fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+                param.map(|t| {
+                    let shape = t.shape();
+                    let n = shape.num_elements();
+                    let v: Vec<f32> = (0..n).map(|_| self.0.range(-0.3, 0.3) as f32).collect();
+                    Tensor::from_data(TensorData::new(v, shape), &t.device())
+                })
+            }
+        }
+        decoder.map(&mut Mapper(Rng::new(seed)))
+    }
+
+    #[test]
+    fn sdf_gradients_match_finite_differences() {
+        let device = cpu_autodiff();
+        // Four octaves (highest frequency 8): with N_pe = 8 the field oscillates at 2^7 per
+        // unit and a 1e-3 central difference is no longer a derivative.
+        let cfg = ShapePriorConfig {
+            pe_freqs: 4,
+            ..tiny()
+        };
+        let mut rng = Rng::new(5);
+        let decoder = randomised(ShapeDecoder::new(&cfg, &mut rng, &device), 9);
+        let (p, n, f) = (2, 4, cfg.latent);
+        let pts: Vec<f32> = (0..p * n * 3)
+            .map(|_| rng.range(-0.4, 0.4) as f32)
+            .collect();
+        let codes: Vec<f32> = (0..p * f).map(|_| rng.range(-1.0, 1.0) as f32).collect();
+        let readout: Vec<f32> = (0..p * n).map(|_| rng.range(-1.0, 1.0) as f32).collect();
+        let r = Tensor::<2>::from_data(TensorData::new(readout, [p, n]), &device);
+        let eval = |pts: &[f32], codes: &[f32]| -> f64 {
+            let x = Tensor::<3>::from_data(TensorData::new(pts.to_vec(), [p, n, 3]), &device);
+            let z = Tensor::<2>::from_data(TensorData::new(codes.to_vec(), [p, f]), &device);
+            let v: f32 = (decoder.sdf(x, z) * r.clone()).sum().into_scalar();
+            v as f64
+        };
+        let x =
+            Tensor::<3>::from_data(TensorData::new(pts.clone(), [p, n, 3]), &device).require_grad();
+        let z =
+            Tensor::<2>::from_data(TensorData::new(codes.clone(), [p, f]), &device).require_grad();
+        let grads = (decoder.sdf(x.clone(), z.clone()) * r.clone())
+            .sum()
+            .backward();
+        let gx = to_vec(x.grad(&grads).expect("gradient w.r.t. points"));
+        let gz = to_vec(z.grad(&grads).expect("gradient w.r.t. codes"));
+        let check = |analytic: &[f32], base: &[f32], eps: f32, is_points: bool| {
+            let mut err2 = 0.0f64;
+            let mut norm2 = 0.0f64;
+            for i in 0..base.len() {
+                let (mut hi, mut lo) = (base.to_vec(), base.to_vec());
+                hi[i] += eps;
+                lo[i] -= eps;
+                let fd = if is_points {
+                    (eval(&hi, &codes) - eval(&lo, &codes)) / (2.0 * eps as f64)
+                } else {
+                    (eval(&pts, &hi) - eval(&pts, &lo)) / (2.0 * eps as f64)
+                };
+                err2 += (analytic[i] as f64 - fd).powi(2);
+                norm2 += fd * fd;
+            }
+            let rel = (err2 / norm2.max(1e-12)).sqrt();
+            assert!(norm2 > 1e-6, "gradient is (numerically) zero");
+            assert!(
+                rel < 2e-2,
+                "relative gradient error {rel} (points: {is_points})"
+            );
+        };
+        check(&gx, &pts, 1e-3, true);
+        check(&gz, &codes, 1e-2, false);
+    }
+
+    /// Median seconds of `f` over `reps` runs after one warm-up.
+    fn median_secs(reps: usize, mut f: impl FnMut()) -> f64 {
+        f();
+        let mut t: Vec<f64> = (0..reps)
+            .map(|_| {
+                let t0 = std::time::Instant::now();
+                f();
+                t0.elapsed().as_secs_f64()
+            })
+            .collect();
+        t.sort_by(f64::total_cmp);
+        t[reps / 2]
+    }
+
+    /// Decoder throughput (BENCHMARKS.md): `cargo test --release --lib shape_prior::tests::
+    /// decoder_throughput -- --ignored --nocapture`.
+    #[test]
+    #[ignore = "benchmark"]
+    fn decoder_throughput() {
+        for (name, cfg) in [
+            ("default", ShapePriorConfig::default()),
+            ("nap", ShapePriorConfig::nap()),
+        ] {
+            for (p, n) in [(1, 8192), (8, 1024), (1, 32768)] {
+                let mut rng = Rng::new(1);
+                let pts: Vec<f32> = (0..p * n * 3)
+                    .map(|_| rng.range(-0.55, 0.55) as f32)
+                    .collect();
+                let codes: Vec<f32> = (0..p * cfg.latent)
+                    .map(|_| rng.range(-1.0, 1.0) as f32)
+                    .collect();
+                let device = cpu();
+                let dec = randomised(ShapeDecoder::new(&cfg, &mut rng, &device), 2);
+                let fwd = median_secs(9, || {
+                    let x =
+                        Tensor::<3>::from_data(TensorData::new(pts.clone(), [p, n, 3]), &device);
+                    let z = Tensor::<2>::from_data(
+                        TensorData::new(codes.clone(), [p, cfg.latent]),
+                        &device,
+                    );
+                    let _ = to_vec(dec.sdf(x, z));
+                });
+                let ad = cpu_autodiff();
+                let dec_ad = dec.clone().fork(&ad).no_grad();
+                let bwd = median_secs(9, || {
+                    let x = Tensor::<3>::from_data(TensorData::new(pts.clone(), [p, n, 3]), &ad)
+                        .require_grad();
+                    let z = Tensor::<2>::from_data(
+                        TensorData::new(codes.clone(), [p, cfg.latent]),
+                        &ad,
+                    )
+                    .require_grad();
+                    let grads = dec_ad.sdf(x.clone(), z.clone()).sum().backward();
+                    let _ = to_vec(x.grad(&grads).unwrap());
+                    let _ = to_vec(z.grad(&grads).unwrap());
+                });
+                let total = (p * n) as f64;
+                println!(
+                    "decoder {name} P={p} N={n}: fwd {:.0} points/s ({:.1} ms), fwd+bwd(points, codes) {:.0} points/s ({:.1} ms), threads {}",
+                    total / fwd,
+                    fwd * 1e3,
+                    total / bwd,
+                    bwd * 1e3,
+                    rayon::current_num_threads()
+                );
+            }
+        }
+    }
+}

@@ -1,0 +1,103 @@
+//! Trainers: the part-shape auto-encoder (`physnap train shape`) and, later, the articulation
+//! denoiser.
+//!
+//! Why it exists: training is a library function (data directory + config in, weights and a
+//! report out, progress through a callback) so the CLI, tests and benchmarks drive the same
+//! code. Trainers read the layout `data::dataset` writes, load what they need into memory once,
+//! and are deterministic for a seed (own [`crate::data::rng::Rng`], seeded weight init). CPU
+//! work runs on the current rayon pool unless a config asks for its own thread count.
+
+pub mod diffusion;
+pub mod shape;
+
+use std::path::{Path, PathBuf};
+
+/// Errors of the training layer.
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    /// A file could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// A data or weights file is malformed or inconsistent (names the file and the problem).
+    #[error("{path}: {detail}")]
+    Data {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong, with the value.
+        detail: String,
+    },
+    /// A configuration value is out of range.
+    #[error("invalid training config {field}: {value} (must be {limit})")]
+    Config {
+        /// The field.
+        field: String,
+        /// The rule.
+        limit: String,
+        /// The value given.
+        value: String,
+    },
+    /// The loss became non-finite or exploded.
+    #[error("training diverged at step {step}: loss {loss}")]
+    Diverged {
+        /// The step (0-based).
+        step: usize,
+        /// The loss value.
+        loss: f64,
+    },
+    /// The model configuration is invalid.
+    #[error(transparent)]
+    Model(#[from] crate::model::ModelError),
+    /// A graph record is inconsistent.
+    #[error(transparent)]
+    Core(#[from] crate::error::CoreError),
+    /// A weights file could not be saved or loaded.
+    #[error(transparent)]
+    Weights(#[from] crate::model::weights::WeightsError),
+}
+
+impl TrainError {
+    /// Machine-readable error kind.
+    pub fn error_type(&self) -> &'static str {
+        match self {
+            TrainError::Io { .. } => "io",
+            TrainError::Data { .. } => "malformed",
+            TrainError::Config { .. } => "invalid_option",
+            TrainError::Diverged { .. } => "diverged",
+            TrainError::Model(_) => "invalid_option",
+            TrainError::Core(e) => e.error_type(),
+            TrainError::Weights(_) => "weights",
+        }
+    }
+
+    /// Wrap an I/O error with its path.
+    pub fn io(path: impl AsRef<Path>) -> impl FnOnce(std::io::Error) -> TrainError {
+        let path = path.as_ref().to_path_buf();
+        move |source| TrainError::Io { path, source }
+    }
+
+    /// A data error about `path`.
+    pub fn data(path: impl AsRef<Path>, detail: impl Into<String>) -> TrainError {
+        TrainError::Data {
+            path: path.as_ref().to_path_buf(),
+            detail: detail.into(),
+        }
+    }
+
+    /// A config error naming field, rule and value.
+    pub fn config(
+        field: impl Into<String>,
+        limit: impl Into<String>,
+        value: impl ToString,
+    ) -> TrainError {
+        TrainError::Config {
+            field: field.into(),
+            limit: limit.into(),
+            value: value.to_string(),
+        }
+    }
+}

@@ -34,13 +34,14 @@ fn bar(total: usize, what: &str) -> ProgressBar {
 }
 
 pub fn shape(a: ShapeArgs) -> anyhow::Result<()> {
-    let mut cfg = ShapeTrainConfig::default();
-    cfg.steps = a.steps;
-    cfg.seed = a.seed;
-    if let Some(b) = a.batch_parts {
-        cfg.batch_parts = b;
-    }
-    cfg.max_parts = a.max_parts;
+    let defaults = ShapeTrainConfig::default();
+    let cfg = ShapeTrainConfig {
+        steps: a.steps,
+        seed: a.seed,
+        batch_parts: a.batch_parts.unwrap_or(defaults.batch_parts),
+        max_parts: a.max_parts,
+        ..defaults
+    };
     let pb = bar(cfg.steps, "shape");
     let report = train_shape(&a.data, &cfg, &a.out, &mut |p| {
         pb.set_position(p.step as u64);

@@ -1,0 +1,188 @@
+//! The whole model pipeline as a user runs it, at toy scale: synth → import → train shape →
+//! train diffusion (writes weights + manifest) → generate (GLB/URDF per sample). CI never trains
+//! a real model: a few steps of tiny configs only.
+
+mod common;
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn physnap(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_physnap"))
+        .args(args)
+        .env("PHYSNAP_LOG", "warn")
+        .output()
+        .expect("run physnap")
+}
+
+fn ok(args: &[&str]) -> String {
+    let o = physnap(args);
+    assert!(
+        o.status.success(),
+        "physnap {args:?} failed:\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn synth_import_train_generate() {
+    let root = tempfile::tempdir().unwrap();
+    let (synth, data, shape, weights, gen1, gen2) = (
+        root.path().join("synth"),
+        root.path().join("train"),
+        root.path().join("shape"),
+        root.path().join("weights"),
+        root.path().join("gen1"),
+        root.path().join("gen2"),
+    );
+    ok(&[
+        "data",
+        "synth",
+        "--out",
+        s(&synth),
+        "--objects",
+        "26",
+        "--seed",
+        "4",
+    ]);
+    ok(&[
+        "data",
+        "import",
+        "--partnet-mobility",
+        s(&synth),
+        "--out",
+        s(&data),
+        "--uniform",
+        "256",
+        "--near",
+        "256",
+        "--surface",
+        "64",
+    ]);
+    ok(&[
+        "train",
+        "shape",
+        "--data",
+        s(&data),
+        "--out",
+        s(&shape),
+        "--steps",
+        "6",
+        "--batch-parts",
+        "4",
+    ]);
+    for f in [
+        "shape_prior.safetensors",
+        "codebook.npy",
+        "codebook.json",
+        "shape_train.json",
+    ] {
+        assert!(shape.join(f).is_file(), "missing {f}");
+    }
+    ok(&[
+        "train",
+        "diffusion",
+        "--data",
+        s(&data),
+        "--shape",
+        s(&shape),
+        "--out",
+        s(&weights),
+        "--steps",
+        "4",
+        "--batch-objects",
+        "2",
+        "--noise-levels",
+        "2",
+        "--width",
+        "32",
+        "--layers",
+        "1",
+    ]);
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(weights.join("manifest.json")).unwrap())
+            .unwrap();
+    assert_eq!(manifest["format"], "physnap.weights/v1");
+    assert_eq!(manifest["categories"].as_array().unwrap().len(), 46);
+    assert_eq!(manifest["denoiser"]["sha256"].as_str().unwrap().len(), 64);
+
+    // Generation is deterministic per seed and writes valid artefacts.
+    let args = |out: &Path| -> Vec<String> {
+        [
+            "generate",
+            "--weights",
+            s(&weights),
+            "--samples",
+            "2",
+            "--seed",
+            "9",
+            "--category",
+            "Laptop",
+            "--resolution",
+            "16",
+            "--out",
+            s(out),
+        ]
+        .iter()
+        .map(|x| x.to_string())
+        .collect()
+    };
+    let a1 = args(&gen1);
+    ok(&a1.iter().map(String::as_str).collect::<Vec<_>>());
+    let a2 = args(&gen2);
+    ok(&a2.iter().map(String::as_str).collect::<Vec<_>>());
+    for k in ["sample_000", "sample_001"] {
+        let j1 = std::fs::read(gen1.join(k).join("object.json")).unwrap();
+        assert_eq!(
+            j1,
+            std::fs::read(gen2.join(k).join("object.json")).unwrap(),
+            "{k} differs between runs"
+        );
+        let obj = physnap::io::object_json::from_str(std::str::from_utf8(&j1).unwrap()).unwrap();
+        assert!(obj.parts.len() >= 2);
+        assert_eq!(obj.category.as_deref(), Some("Laptop"));
+        common::check_urdf(&gen1.join(k).join("robot.urdf"));
+        let report = common::gltf_validate(&gen1.join(k).join("model.glb"));
+        assert_eq!(report["numErrors"], 0, "{report:#}");
+    }
+
+    // Bad inputs are refused clearly.
+    let o = physnap(&[
+        "generate",
+        "--weights",
+        s(&weights),
+        "--category",
+        "Spaceship",
+        "--out",
+        s(&gen1),
+    ]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("invalid --category \"Spaceship\""));
+    let o = physnap(&[
+        "generate",
+        "--weights",
+        s(&root.path().join("nowhere")),
+        "--out",
+        s(&gen1),
+    ]);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no trained weights"));
+
+    // A corrupted weights file is refused with a checksum error.
+    let w = weights.join("denoiser.safetensors");
+    let mut bytes = std::fs::read(&w).unwrap();
+    let n = bytes.len();
+    bytes[n - 3] ^= 0xFF;
+    std::fs::write(&w, bytes).unwrap();
+    let o = physnap(&["generate", "--weights", s(&weights), "--out", s(&gen1)]);
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        e.contains("sha256 mismatch") && e.contains("denoiser.safetensors"),
+        "{e}"
+    );
+}

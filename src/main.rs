@@ -251,6 +251,12 @@ struct RenderArgs {
     /// Contact-sheet columns.
     #[arg(long, env = "PHYSNAP_RENDER_COLUMNS", default_value_t = 4)]
     columns: usize,
+    /// Weights directory, used to mesh parts with latent (generated) shapes.
+    #[arg(long, env = "PHYSNAP_WEIGHTS", default_value = "weights")]
+    weights: PathBuf,
+    /// Marching-cubes resolution for latent shapes.
+    #[arg(long, env = "PHYSNAP_MC_RESOLUTION", default_value_t = physnap::mesh::DEFAULT_RESOLUTION)]
+    resolution: usize,
 }
 
 #[derive(Args, Debug)]
@@ -316,18 +322,40 @@ fn render(a: RenderArgs) -> anyhow::Result<()> {
         anyhow::bail!("invalid --size: {} (must be between 16 and 4096)", a.size);
     }
     let mut items = Vec::new();
+    let mut models = None;
     for path in &a.objects {
         let obj = physnap::io::object_json::read(path)
             .with_context(|| format!("reading {}", path.display()))?;
-        let meshes = obj
+        let latent = obj
             .parts
             .iter()
-            .map(|p| {
-                physnap::mesh::primitives::part_primitive_mesh(p).with_context(|| {
-                    format!("{}: part {:?} has a latent shape; render the exported sample's object.json after meshing, or use analytic shapes", path.display(), p.name)
-                })
-            })
-            .collect::<anyhow::Result<Vec<_>>>()?;
+            .any(|p| matches!(p.shape, physnap::PartShape::Latent(_)));
+        let meshes = if latent {
+            if models.is_none() {
+                let loaded = physnap::io::manifest::load_models(&a.weights, &physnap::model::cpu())
+                    .with_context(|| {
+                        format!(
+                            "{} has generated (latent) part shapes; meshing them needs the weights",
+                            path.display()
+                        )
+                    })?;
+                models = Some(loaded);
+            }
+            let m = models.as_ref().expect("loaded just above");
+            let decoder =
+                physnap::model::shape_prior::LatentSdfDecoder::new(&m.shape_prior.decoder);
+            let opts = MeshingOptions {
+                resolution: a.resolution,
+            };
+            opts.validate()?;
+            physnap::mesh::mesh_parts(&obj, Some(&decoder), &opts)?
+        } else {
+            // No part is latent here, and only latent parts lack a primitive mesh.
+            obj.parts
+                .iter()
+                .filter_map(physnap::mesh::primitives::part_primitive_mesh)
+                .collect()
+        };
         items.push((obj, meshes));
     }
     let img = if items.len() == 1 {

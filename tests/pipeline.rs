@@ -151,6 +151,22 @@ fn synth_import_train_generate() {
         assert_eq!(report["numErrors"], 0, "{report:#}");
     }
 
+    // Generated (latent) shapes render with the weights.
+    let png = root.path().join("sample.png");
+    ok(&[
+        "render",
+        s(&gen1.join("sample_000/object.json")),
+        "--weights",
+        s(&weights),
+        "--resolution",
+        "16",
+        "--size",
+        "64",
+        "--out",
+        s(&png),
+    ]);
+    assert_eq!(&std::fs::read(&png).unwrap()[..4], b"\x89PNG");
+
     // Bad inputs are refused clearly.
     let o = physnap(&[
         "generate",

@@ -6,7 +6,6 @@
 use std::path::Path;
 
 use anyhow::{Context, bail};
-use indicatif::{ProgressBar, ProgressStyle};
 
 use physnap::data::categories::{SYNTH_CATEGORIES, canonical_name};
 use physnap::data::dataset::{ImportOptions, import_dir, load_object_meshes};
@@ -17,17 +16,6 @@ use physnap::data::scan::{ScanOptions, scan as scan_object};
 use physnap::pointcloud::{Format, PointCloud, write_coloured_ply};
 
 use super::{ImportArgs, ScanArgs, SynthArgs, TestsetArgs};
-
-fn bar(total: usize, what: &str) -> ProgressBar {
-    let pb = ProgressBar::new(total as u64);
-    pb.set_style(
-        ProgressStyle::with_template("{msg:>10} [{bar:40}] {pos}/{len} {per_sec} eta {eta}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
-    );
-    pb.set_message(what.to_string());
-    pb
-}
 
 pub fn synth(a: SynthArgs) -> anyhow::Result<()> {
     let categories: Vec<String> = if a.categories.is_empty() {
@@ -47,7 +35,7 @@ pub fn synth(a: SynthArgs) -> anyhow::Result<()> {
     if a.objects == 0 {
         bail!("invalid --objects: 0 (must be at least 1)");
     }
-    let pb = bar(a.objects, "synth");
+    let pb = super::progress_bar(a.objects, "synth");
     let t0 = std::time::Instant::now();
     let report = synthesize(
         &a.out,
@@ -99,7 +87,7 @@ pub fn import(a: ImportArgs) -> anyhow::Result<()> {
             a.src.display()
         );
     }
-    let pb = bar(total, "import");
+    let pb = super::progress_bar(total, "import");
     let t0 = std::time::Instant::now();
     let report = import_dir(
         &a.src,
@@ -205,7 +193,7 @@ pub fn testset(a: TestsetArgs) -> anyhow::Result<()> {
     ids.truncate(a.count);
     ids.sort();
     std::fs::create_dir_all(&a.out)?;
-    let pb = bar(ids.len(), "scan");
+    let pb = super::progress_bar(ids.len(), "scan");
     let mut entries = Vec::new();
     for (k, id) in ids.iter().enumerate() {
         let (object, meshes) = load_object_meshes(&a.data.join("objects").join(id))?;

@@ -4,7 +4,6 @@ use std::ops::ControlFlow;
 use std::path::Path;
 
 use anyhow::{Context, bail};
-use indicatif::{ProgressBar, ProgressStyle};
 
 use physnap::data::categories::category_index;
 use physnap::engine::generate::{GenerateRequest, generate as run_generate};
@@ -20,19 +19,6 @@ use physnap::train::shape::{ShapeTrainConfig, read_model_config, train_shape};
 
 use super::{DiffusionArgs, GenerateArgs, ShapeArgs};
 
-fn bar(total: usize, what: &str) -> ProgressBar {
-    let pb = ProgressBar::new(total as u64);
-    pb.set_style(
-        ProgressStyle::with_template(
-            "{msg:>10} [{bar:40}] {pos}/{len} {per_sec} eta {eta} {prefix}",
-        )
-        .unwrap_or_else(|_| ProgressStyle::default_bar())
-        .progress_chars("=> "),
-    );
-    pb.set_message(what.to_string());
-    pb
-}
-
 pub fn shape(a: ShapeArgs) -> anyhow::Result<()> {
     let defaults = ShapeTrainConfig::default();
     let cfg = ShapeTrainConfig {
@@ -42,7 +28,7 @@ pub fn shape(a: ShapeArgs) -> anyhow::Result<()> {
         max_parts: a.max_parts,
         ..defaults
     };
-    let pb = bar(cfg.steps, "shape");
+    let pb = super::progress_bar(cfg.steps, "shape");
     let report = train_shape(&a.data, &cfg, &a.out, &mut |p| {
         pb.set_position(p.step as u64);
         match p.val_iou {
@@ -83,7 +69,7 @@ pub fn diffusion(a: DiffusionArgs) -> anyhow::Result<()> {
         checkpoint_every: a.checkpoint_every,
         ..DiffusionTrainConfig::default()
     };
-    let pb = bar(cfg.steps, "diffusion");
+    let pb = super::progress_bar(cfg.steps, "diffusion");
     let report = train_diffusion(&data, &cfg, &a.out, a.resume, &mut |p| {
         pb.set_position(p.step as u64);
         pb.set_prefix(format!("loss {:.4} (ema {:.4})", p.loss, p.loss_ema));
@@ -177,7 +163,7 @@ pub fn generate(a: GenerateArgs) -> anyhow::Result<()> {
     };
     req.meshing.validate()?;
     let schedule = Schedule::default();
-    let pb = bar(a.samples * schedule.len(), "generate");
+    let pb = super::progress_bar(a.samples * schedule.len(), "generate");
     let decoder = LatentSdfDecoder::new(&models.shape_prior.decoder);
     let results = run_generate(
         &models.denoiser,

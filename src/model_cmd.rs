@@ -160,6 +160,7 @@ pub fn generate(a: GenerateArgs) -> anyhow::Result<()> {
         meshing: MeshingOptions {
             resolution: a.resolution,
         },
+        ..Default::default()
     };
     req.meshing.validate()?;
     let schedule = Schedule::default();

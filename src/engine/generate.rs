@@ -17,7 +17,7 @@ use crate::object::ArticulatedObject;
 use crate::shape::LatentDecoder;
 
 /// What to generate.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct GenerateRequest {
     /// Seed of sample 0 (sample i uses seed + i).
     pub seed: u64,
@@ -29,6 +29,9 @@ pub struct GenerateRequest {
     pub category_name: Option<String>,
     /// Meshing settings.
     pub meshing: MeshingOptions,
+    /// Attach x̂₀ previews to every this many steps' events (0: never); see
+    /// [`SampleRequest::preview_every`].
+    pub preview_every: usize,
 }
 
 /// One generated sample.
@@ -75,6 +78,7 @@ pub fn generate(
                 seed,
                 batch: 1,
                 category: req.category,
+                preview_every: req.preview_every,
             },
             &device,
             &mut |s| {

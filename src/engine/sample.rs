@@ -19,7 +19,7 @@ use crate::graph::{EDGE_DIM, GraphTensor, K, NODE_DIM, NUM_EDGES};
 use crate::model::denoiser::Denoiser;
 
 /// What to sample.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct SampleRequest {
     /// Seed of all noise.
     pub seed: u64,
@@ -28,10 +28,13 @@ pub struct SampleRequest {
     /// Category index (None = unconditional, using the model's "no category" entry when it
     /// has one).
     pub category: Option<usize>,
+    /// Attach the predicted clean graph x̂₀ to every this many steps' event (0: never). The
+    /// service streams it as a light preview of where the sample is heading.
+    pub preview_every: usize,
 }
 
 /// Reported after every reverse step.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct StepEvent {
     /// 1-based step number.
     pub step: usize,
@@ -39,6 +42,9 @@ pub struct StepEvent {
     pub total: usize,
     /// Diffusion time index of the step just taken (999 … 0).
     pub t: usize,
+    /// x̂₀ = (x_t − √(1−ᾱ_t) ε̂) / √ᾱ_t of this step in model (scaled) space, one graph per batch
+    /// element; present every `preview_every` steps and on the last step when requested.
+    pub x0_preview: Option<Vec<GraphTensor>>,
 }
 
 fn gaussian(rng: &mut Rng, n: usize) -> Vec<f32> {
@@ -79,6 +85,15 @@ pub fn sample(
     for (k, t) in (0..total).rev().enumerate() {
         let tt = Tensor::<1, Int>::from_data(TensorData::new(vec![t as i64; b], [b]), device);
         let (eps_v, eps_e) = model.forward(v.clone(), e.clone(), tt, category.clone());
+        let x0_preview = (req.preview_every > 0 && ((k + 1) % req.preview_every == 0 || t == 0))
+            .then(|| {
+                let (s, n) = schedule.noise_coefficients(t);
+                let (s, n) = (s as f32, n as f32);
+                from_tensors(
+                    (v.clone() - eps_v.clone() * n) / s,
+                    (e.clone() - eps_e.clone() * n) / s,
+                )
+            });
         let c = schedule.step_coefficients(t);
         v = v * c.c_x - eps_v * c.c_eps;
         e = e * c.c_x - eps_e * c.c_eps;
@@ -111,6 +126,7 @@ pub fn sample(
             step: k + 1,
             total,
             t,
+            x0_preview,
         }) {
             return Err(EngineError::Stopped {
                 step: k + 1,
@@ -149,6 +165,7 @@ mod tests {
             seed: 7,
             batch: 2,
             category: Some(1),
+            preview_every: 0,
         };
         let mut steps = Vec::new();
         let a = sample(&model, &schedule, &req, &dev, &mut |s| {
@@ -179,12 +196,45 @@ mod tests {
     }
 
     #[test]
+    fn previews_come_every_k_steps_and_the_last_one_is_the_result() {
+        let model = tiny();
+        let req = SampleRequest {
+            seed: 3,
+            batch: 1,
+            category: None,
+            preview_every: 250,
+        };
+        let mut previews = Vec::new();
+        let out = sample(
+            &model,
+            &Schedule::default(),
+            &req,
+            &crate::model::cpu(),
+            &mut |s| {
+                if let Some(p) = &s.x0_preview {
+                    previews.push((s.step, p.clone()));
+                }
+                ControlFlow::Continue(())
+            },
+        )
+        .unwrap();
+        let steps: Vec<usize> = previews.iter().map(|(s, _)| *s).collect();
+        assert_eq!(steps, vec![250, 500, 750, 1000]);
+        // At t = 0 the DDPM mean is exactly x̂₀ (σ = 0, ᾱ₀ = α₀).
+        let last = previews.last().unwrap().1[0].flatten();
+        for (a, b) in last.iter().zip(out[0].flatten()) {
+            assert!((a - b).abs() < 1e-3 * (1.0 + b.abs()), "{a} vs {b}");
+        }
+    }
+
+    #[test]
     fn the_callback_can_stop_a_run() {
         let model = tiny();
         let req = SampleRequest {
             seed: 1,
             batch: 1,
             category: None,
+            preview_every: 0,
         };
         let e = sample(
             &model,

@@ -103,7 +103,7 @@ impl Default for ShapeTrainConfig {
             batch_parts: 16,
             queries_per_part: 2048,
             surface_points: 512,
-            lr: 5e-4,
+            lr: 1e-3,
             lr_final_factor: 0.1,
             w_reg: 1e-3,
             truncation: None,

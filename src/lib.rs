@@ -17,6 +17,7 @@ pub mod model;
 pub mod object;
 pub mod pointcloud;
 pub mod render;
+pub mod service;
 pub mod shape;
 pub mod train;
 

@@ -15,6 +15,7 @@ use physnap::mesh::MeshingOptions;
 
 mod data_cmd;
 mod model_cmd;
+mod serve_cmd;
 
 // mimalloc instead of glibc malloc: the ML stack allocates and frees many short-lived buffers
 // per step, and glibc's allocator roughly doubles backward-pass time (ml-stack.md §TL;DR).
@@ -51,6 +52,10 @@ enum Command {
         #[command(subcommand)]
         command: DataCommand,
     },
+    /// Run the inference service: REST + SSE, gRPC, admin (metrics, health); see README.
+    Serve(serve_cmd::ServeArgs),
+    /// Exit 0 when a running server's admin /readyz answers 200 (container health checks).
+    Healthcheck(serve_cmd::HealthcheckArgs),
 }
 
 #[derive(Subcommand, Debug)]
@@ -322,6 +327,8 @@ fn run(command: Command) -> anyhow::Result<()> {
             TrainCommand::Diffusion(a) => model_cmd::diffusion(a),
         },
         Command::Generate(a) => model_cmd::generate(a),
+        Command::Serve(a) => serve_cmd::serve(a),
+        Command::Healthcheck(a) => serve_cmd::healthcheck(a),
         Command::Data { command } => match command {
             DataCommand::Synth(a) => data_cmd::synth(a),
             DataCommand::Import(a) => data_cmd::import(a),

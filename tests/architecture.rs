@@ -13,7 +13,9 @@ const TRANSPORT_FREE: &[&str] = &[
     "src/model",
     "src/engine",
 ];
-const FORBIDDEN: &[&str] = &["serde", "axum", "tonic", "prost", "utoipa"];
+const FORBIDDEN: &[&str] = &[
+    "serde", "axum", "tonic", "prost", "utoipa", "tokio", "rusqlite", "reqwest",
+];
 
 fn rust_files(p: &Path, out: &mut Vec<std::path::PathBuf>) {
     if p.is_dir() {

@@ -1,0 +1,173 @@
+//! CLI wiring of `physnap serve` and `physnap healthcheck` (binary only).
+//!
+//! Why it exists: the flags (each with a `PHYSNAP_*` env twin) become a
+//! [`ServeConfig`](physnap::service::server::ServeConfig); the effective config is logged with
+//! the tokens redacted; SIGINT/SIGTERM start the graceful drain. `healthcheck` is a tiny HTTP
+//! GET of the admin `/readyz` so container images need no curl.
+
+use std::io::{Read, Write};
+use std::net::{SocketAddr, TcpStream};
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::Context;
+use clap::Args;
+
+use physnap::service::auth::Tenants;
+use physnap::service::server::{ServeConfig, Server};
+
+#[derive(Args, Debug)]
+pub struct ServeArgs {
+    /// REST (+ SSE) listen address.
+    #[arg(long, env = "PHYSNAP_HTTP", default_value = "127.0.0.1:8080")]
+    http: SocketAddr,
+    /// gRPC listen address.
+    #[arg(long, env = "PHYSNAP_GRPC", default_value = "127.0.0.1:50051")]
+    grpc: SocketAddr,
+    /// Admin listen address (/metrics, /livez, /readyz); keep it off the gateway.
+    #[arg(long, env = "PHYSNAP_ADMIN", default_value = "127.0.0.1:9000")]
+    admin: SocketAddr,
+    /// Job store (SQLite) and artefacts.
+    #[arg(long, env = "PHYSNAP_DATA_DIR", default_value = "data")]
+    data_dir: PathBuf,
+    /// Weights directory with manifest.json.
+    #[arg(long, env = "PHYSNAP_WEIGHTS", default_value = "weights")]
+    weights: PathBuf,
+    /// Jobs running at once.
+    #[arg(long, env = "PHYSNAP_MAX_RUNNING_JOBS", default_value_t = 1)]
+    max_running_jobs: usize,
+    /// Threads of the job worker pool (default: all cores).
+    #[arg(long, env = "PHYSNAP_WORKER_THREADS")]
+    worker_threads: Option<usize>,
+    /// Jobs waiting at most; beyond that submissions get 429 / RESOURCE_EXHAUSTED.
+    #[arg(long, env = "PHYSNAP_QUEUE_CAPACITY", default_value_t = 64)]
+    queue_capacity: usize,
+    /// Largest request body / gRPC message (bytes).
+    #[arg(long, env = "PHYSNAP_MAX_BODY_BYTES", default_value_t = 16 << 20)]
+    max_body_bytes: usize,
+    /// Default job deadline (seconds) when a request gives none.
+    #[arg(long, env = "PHYSNAP_JOB_TIMEOUT", default_value_t = 3600.0)]
+    job_timeout: f64,
+    /// Seconds running jobs may take to finish after a shutdown signal.
+    #[arg(long, env = "PHYSNAP_DRAIN_TIMEOUT", default_value_t = 30.0)]
+    drain_timeout: f64,
+    /// Retry-After (seconds) on 429 / 503.
+    #[arg(long, env = "PHYSNAP_RETRY_AFTER", default_value_t = 30)]
+    retry_after: u64,
+    /// Bearer tokens, `tenant:token,...`. None (and no file): no authentication, loopback only.
+    #[arg(long, env = "PHYSNAP_TOKENS", default_value = "", hide_env_values = true)]
+    tokens: String,
+    /// File of `tenant token` lines.
+    #[arg(long, env = "PHYSNAP_TOKENS_FILE")]
+    tokens_file: Option<PathBuf>,
+}
+
+pub fn serve(a: ServeArgs) -> anyhow::Result<()> {
+    let tenants = Tenants::load(&a.tokens, a.tokens_file.as_deref()).map_err(anyhow::Error::msg)?;
+    if !(a.drain_timeout.is_finite() && a.drain_timeout >= 0.0) {
+        anyhow::bail!("invalid --drain-timeout: {} (must be >= 0)", a.drain_timeout);
+    }
+    if a.max_running_jobs == 0 || a.queue_capacity == 0 {
+        anyhow::bail!("invalid --max-running-jobs / --queue-capacity: must be at least 1");
+    }
+    let worker_threads = a.worker_threads.unwrap_or_else(|| {
+        std::thread::available_parallelism()
+            .map(|n| n.get())
+            .unwrap_or(1)
+    });
+    let cfg = ServeConfig {
+        http: a.http,
+        grpc: a.grpc,
+        admin: a.admin,
+        data_dir: a.data_dir,
+        weights: a.weights,
+        max_running_jobs: a.max_running_jobs,
+        worker_threads,
+        queue_capacity: a.queue_capacity,
+        max_body_bytes: a.max_body_bytes,
+        job_timeout_seconds: a.job_timeout,
+        drain_timeout: Duration::from_secs_f64(a.drain_timeout),
+        retry_after_seconds: a.retry_after,
+        tenants,
+    };
+    let auth = if cfg.tenants.is_open() {
+        "none (loopback only)"
+    } else {
+        "bearer"
+    };
+    tracing::info!(
+        http = %cfg.http, grpc = %cfg.grpc, admin = %cfg.admin,
+        data_dir = %cfg.data_dir.display(), weights = %cfg.weights.display(),
+        max_running_jobs = cfg.max_running_jobs, worker_threads = cfg.worker_threads,
+        queue_capacity = cfg.queue_capacity, max_body_bytes = cfg.max_body_bytes,
+        job_timeout_s = cfg.job_timeout_seconds, drain_timeout_s = a.drain_timeout,
+        retry_after_s = cfg.retry_after_seconds,
+        tenants = ?cfg.tenants.tenant_names(), tokens = "[redacted]",
+        auth,
+        "effective config"
+    );
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .thread_name("physnap-io")
+        .build()?;
+    rt.block_on(async move {
+        let server = Server::bind(cfg).await?;
+        let addrs = server.addrs();
+        // One machine-readable line on stdout, so scripts (and tests) using port 0 can find us.
+        println!(
+            "physnap serve: http={} grpc={} admin={}",
+            addrs.http, addrs.grpc, addrs.admin
+        );
+        std::io::stdout().flush().ok();
+        tracing::info!(http = %addrs.http, grpc = %addrs.grpc, admin = %addrs.admin, "listening");
+        server.run(shutdown_signal()).await?;
+        Ok::<_, anyhow::Error>(())
+    })
+}
+
+async fn shutdown_signal() {
+    let ctrl_c = async {
+        let _ = tokio::signal::ctrl_c().await;
+    };
+    #[cfg(unix)]
+    let term = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let term = std::future::pending::<()>();
+    tokio::select! { _ = ctrl_c => {}, _ = term => {} }
+}
+
+#[derive(Args, Debug)]
+pub struct HealthcheckArgs {
+    /// Admin address of the server.
+    #[arg(long, env = "PHYSNAP_ADMIN", default_value = "127.0.0.1:9000")]
+    admin: SocketAddr,
+}
+
+/// GET /readyz with a 2 s timeout; Ok when it answers 200.
+pub fn healthcheck(a: HealthcheckArgs) -> anyhow::Result<()> {
+    let t = Duration::from_secs(2);
+    let mut s = TcpStream::connect_timeout(&a.admin, t)
+        .with_context(|| format!("connecting to {}", a.admin))?;
+    s.set_read_timeout(Some(t))?;
+    s.set_write_timeout(Some(t))?;
+    write!(
+        s,
+        "GET /readyz HTTP/1.1\r\nHost: {}\r\nConnection: close\r\n\r\n",
+        a.admin
+    )?;
+    let mut resp = String::new();
+    s.read_to_string(&mut resp)?;
+    let status = resp.lines().next().unwrap_or("");
+    if status.split_whitespace().nth(1) == Some("200") {
+        Ok(())
+    } else {
+        anyhow::bail!("not ready: {status}")
+    }
+}

@@ -1,0 +1,494 @@
+//! Wire types of the job API (JSON, with OpenAPI schemas) and their conversions.
+//!
+//! Why it exists: the JSON documents (the job, its progress, events, problems, the request) are
+//! shared by REST responses, SSE `data:` lines and the gRPC messages' `json` fields, so they are
+//! defined once, here, next to the `utoipa` schemas that `openapi.yaml` is generated from.
+//! Nothing outside `src/service` sees these types; requests become a domain
+//! [`JobInput`](super::spec::JobInput) before validation.
+
+use base64::Engine as _;
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+use super::runner::{Preview, Progress};
+use super::spec::{JobInput, JobSpec, PointsInput};
+use super::store::{Artifact, JobRecord};
+
+/// A job request (`POST /v1/jobs`, `application/json`). Give the point cloud in exactly one of
+/// `points`, `points_f32le_base64`, `points_ply_base64`, `points_npy_base64`.
+///
+/// The cloud is validated (16–100 000 finite points) and stored with the job, but the engine
+/// has no guidance yet: generation does not depend on the cloud or on `w_pc`, `w_pen`, `w_mob`,
+/// `n_g`, `tau` until point-cloud guidance lands.
+#[derive(Debug, Clone, Default, Deserialize, Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct JobRequest {
+    /// `[[x, y, z], ...]`, object frame, metres.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub points: Option<Vec<[f64; 3]>>,
+    /// Base64 of little-endian f32 triples.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub points_f32le_base64: Option<String>,
+    /// Base64 of a PLY file (any PLY encoding).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub points_ply_base64: Option<String>,
+    /// Base64 of a NumPy `(N, 3)` float array.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub points_npy_base64: Option<String>,
+    /// Category (see `/v1/categories`); absent = unconditional.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub category: Option<String>,
+    /// Point-cloud loss weight (>= 0). Stored; not applied until guidance lands.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub w_pc: Option<f64>,
+    /// Penetration loss weight (>= 0). Stored; not applied until guidance lands.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub w_pen: Option<f64>,
+    /// Mobility loss weight (>= 0). Stored; not applied until guidance lands.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub w_mob: Option<f64>,
+    /// Guidance gradient steps per diffusion step (default 1, at most 100).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub n_g: Option<u32>,
+    /// Guidance applies for diffusion time t < tau (default steps / 2).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tau: Option<u32>,
+    /// Sampler: `ddpm` (the only one today).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sampler: Option<String>,
+    /// Diffusion steps; must equal the schedule (1000) for `ddpm`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub steps: Option<u32>,
+    /// Seed of sample 0; absent = random, echoed in `request.seed`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed: Option<u64>,
+    /// Best-of-N samples (1–16).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub samples: Option<u32>,
+    /// Seconds from submission until the job fails with `deadline-exceeded`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub deadline_seconds: Option<f64>,
+    /// Attach an x̂₀ preview to every this many steps' progress (0 = never).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub preview_every: Option<u32>,
+    /// Marching-cubes resolution (8–128, default 32).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub resolution: Option<u32>,
+}
+
+/// Query parameters of a raw upload (`POST /v1/jobs` with a PLY, NPY or f32le body): the same
+/// knobs as [`JobRequest`] without the points.
+#[derive(Debug, Clone, Default, Deserialize, ToSchema, utoipa::IntoParams)]
+#[serde(deny_unknown_fields)]
+#[into_params(parameter_in = Query)]
+pub struct UploadParams {
+    /// Category.
+    pub category: Option<String>,
+    /// Point-cloud loss weight.
+    pub w_pc: Option<f64>,
+    /// Penetration loss weight.
+    pub w_pen: Option<f64>,
+    /// Mobility loss weight.
+    pub w_mob: Option<f64>,
+    /// Guidance steps per diffusion step.
+    pub n_g: Option<u32>,
+    /// Guidance window.
+    pub tau: Option<u32>,
+    /// Sampler.
+    pub sampler: Option<String>,
+    /// Diffusion steps.
+    pub steps: Option<u32>,
+    /// Seed.
+    pub seed: Option<u64>,
+    /// Best-of-N.
+    pub samples: Option<u32>,
+    /// Deadline (s).
+    pub deadline_seconds: Option<f64>,
+    /// Preview period.
+    pub preview_every: Option<u32>,
+    /// Meshing resolution.
+    pub resolution: Option<u32>,
+}
+
+impl JobRequest {
+    /// Into the domain input. More than one points field is reported as `points` violating
+    /// "exactly one of ...".
+    pub fn into_input(self) -> Result<JobInput, super::spec::Violation> {
+        let b64 = |field: &'static str, s: &str| {
+            base64::engine::general_purpose::STANDARD
+                .decode(s.trim())
+                .map_err(|e| super::spec::Violation {
+                    field: field.into(),
+                    limit: "valid base64".into(),
+                    value: e.to_string(),
+                })
+        };
+        let mut given = Vec::new();
+        if let Some(p) = self.points {
+            given.push(PointsInput::Triples(p));
+        }
+        if let Some(s) = &self.points_f32le_base64 {
+            given.push(PointsInput::F32Le(b64("points_f32le_base64", s)?));
+        }
+        if let Some(s) = &self.points_ply_base64 {
+            given.push(PointsInput::Ply(b64("points_ply_base64", s)?));
+        }
+        if let Some(s) = &self.points_npy_base64 {
+            given.push(PointsInput::Npy(b64("points_npy_base64", s)?));
+        }
+        if given.len() > 1 {
+            return Err(super::spec::Violation {
+                field: "points".into(),
+                limit: "exactly one of points, points_f32le_base64, points_ply_base64, points_npy_base64".into(),
+                value: format!("{} given", given.len()),
+            });
+        }
+        Ok(JobInput {
+            points: given.pop(),
+            category: self.category,
+            w_pc: self.w_pc,
+            w_pen: self.w_pen,
+            w_mob: self.w_mob,
+            n_g: self.n_g,
+            tau: self.tau,
+            sampler: self.sampler,
+            steps: self.steps,
+            seed: self.seed,
+            samples: self.samples,
+            deadline_seconds: self.deadline_seconds,
+            preview_every: self.preview_every,
+            resolution: self.resolution,
+        })
+    }
+}
+
+impl UploadParams {
+    /// Into the domain input with the uploaded cloud.
+    pub fn into_input(self, points: PointsInput) -> JobInput {
+        JobInput {
+            points: Some(points),
+            category: self.category,
+            w_pc: self.w_pc,
+            w_pen: self.w_pen,
+            w_mob: self.w_mob,
+            n_g: self.n_g,
+            tau: self.tau,
+            sampler: self.sampler,
+            steps: self.steps,
+            seed: self.seed,
+            samples: self.samples,
+            deadline_seconds: self.deadline_seconds,
+            preview_every: self.preview_every,
+            resolution: self.resolution,
+        }
+    }
+}
+
+/// The validated request, echoed back (seed always set).
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct RequestView {
+    /// Category, canonical spelling.
+    pub category: Option<String>,
+    /// Point count.
+    pub point_count: usize,
+    /// Point-cloud loss weight.
+    pub w_pc: f64,
+    /// Penetration loss weight.
+    pub w_pen: f64,
+    /// Mobility loss weight.
+    pub w_mob: f64,
+    /// Guidance steps per diffusion step.
+    pub n_g: u32,
+    /// Guidance window.
+    pub tau: u32,
+    /// Sampler.
+    pub sampler: String,
+    /// Diffusion steps.
+    pub steps: u32,
+    /// Seed of sample 0.
+    pub seed: u64,
+    /// Best-of-N.
+    pub samples: u32,
+    /// Deadline (s from submission).
+    pub deadline_seconds: f64,
+    /// Preview period.
+    pub preview_every: u32,
+    /// Meshing resolution.
+    pub resolution: u32,
+    /// Whether guidance is applied. Always false in this version: the engine has no guidance
+    /// terms yet, so the cloud and loss weights do not affect the result.
+    pub guided: bool,
+}
+
+/// A part box of a preview.
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct PreviewPartView {
+    /// Part name.
+    pub name: String,
+    /// Box centre (m).
+    pub center: [f64; 3],
+    /// Half-extents (m).
+    pub half_extents: [f64; 3],
+}
+
+/// A joint of a preview.
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct PreviewJointView {
+    /// Parent part index.
+    pub parent: usize,
+    /// Child part index.
+    pub child: usize,
+    /// Joint kind.
+    pub kind: String,
+    /// Unit axis.
+    pub axis: [f64; 3],
+    /// A point on the axis.
+    pub origin: [f64; 3],
+}
+
+/// The projected x̂₀ of a step.
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct PreviewView {
+    /// Part boxes.
+    pub parts: Vec<PreviewPartView>,
+    /// Joints.
+    pub joints: Vec<PreviewJointView>,
+}
+
+/// Progress of a running job.
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct ProgressView {
+    /// `denoising`, `meshing` or `exporting`.
+    pub phase: String,
+    /// Sample being drawn (0-based).
+    pub sample: u32,
+    /// Samples in the job.
+    pub samples: u32,
+    /// 1-based step within the sample.
+    pub step: u32,
+    /// Steps per sample.
+    pub total_steps: u32,
+    /// Diffusion time index.
+    pub t: u32,
+    /// Estimated seconds left.
+    pub eta_seconds: Option<f64>,
+    /// x̂₀ preview (every `preview_every` steps).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub preview: Option<PreviewView>,
+}
+
+/// A committed artefact.
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct ArtifactView {
+    /// File name.
+    pub name: String,
+    /// Media type.
+    pub media_type: String,
+    /// Size.
+    pub size_bytes: u64,
+    /// Hex sha256.
+    pub sha256: String,
+    /// Download path.
+    pub href: String,
+}
+
+/// Why a job failed or was cancelled.
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct JobErrorView {
+    /// `deadline-exceeded`, `cancelled`, `engine`, `internal`.
+    #[serde(rename = "type")]
+    pub error_type: String,
+    /// Detail.
+    pub detail: String,
+}
+
+/// A job.
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct JobView {
+    /// UUIDv7.
+    pub id: String,
+    /// `jobs/{id}`.
+    pub name: String,
+    /// `QUEUED`, `RUNNING`, `SUCCEEDED`, `FAILED`, `CANCELLED`.
+    pub state: String,
+    /// Runs started (2 after a re-run following a restart).
+    pub attempt: u32,
+    /// Sequence of the last persisted event.
+    pub sequence: u64,
+    /// Unix ms.
+    pub create_time_ms: i64,
+    /// Unix ms.
+    pub start_time_ms: Option<i64>,
+    /// Unix ms.
+    pub end_time_ms: Option<i64>,
+    /// Unix ms.
+    pub deadline_ms: i64,
+    /// Cancellation was requested and takes effect at the next step.
+    pub cancel_requested: bool,
+    /// The validated request.
+    pub request: RequestView,
+    /// Latest progress (running jobs).
+    pub progress: Option<ProgressView>,
+    /// Set when FAILED or CANCELLED.
+    pub error: Option<JobErrorView>,
+    /// Set when SUCCEEDED.
+    pub artifacts: Vec<ArtifactView>,
+}
+
+/// A page of jobs.
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct JobList {
+    /// Oldest first.
+    pub jobs: Vec<JobView>,
+    /// Opaque; absent on the last page.
+    pub next_page_token: Option<String>,
+}
+
+/// RFC 9457 problem details.
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct Problem {
+    /// `/problems/<kind>`.
+    #[serde(rename = "type")]
+    pub problem_type: String,
+    /// Short summary.
+    pub title: String,
+    /// HTTP status.
+    pub status: u16,
+    /// What is wrong, naming field, limit and value for validation errors.
+    pub detail: String,
+    /// The request path.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub instance: Option<String>,
+    /// Field errors.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub errors: Vec<FieldError>,
+    /// Seconds to wait before retrying (429, 503).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub retry_after_seconds: Option<u64>,
+}
+
+/// One field violation.
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct FieldError {
+    /// JSON pointer of the field (`/points/3/1`).
+    pub pointer: String,
+    /// The field's path as named in messages (`points[3][1]`).
+    pub field: String,
+    /// The rule.
+    pub limit: String,
+    /// The value given.
+    pub value: String,
+    /// Sentence.
+    pub detail: String,
+}
+
+/// Media type of an artefact name.
+pub fn media_type(name: &str) -> &'static str {
+    match name {
+        "model.glb" => "model/gltf-binary",
+        "robot.zip" => "application/zip",
+        "object.json" => "application/json",
+        _ => "application/octet-stream",
+    }
+}
+
+/// The artefacts a job produces.
+pub const ARTIFACT_NAMES: [&str; 3] = ["model.glb", "robot.zip", "object.json"];
+
+/// Request echo of a spec.
+pub fn request_view(s: &JobSpec) -> RequestView {
+    RequestView {
+        category: s.category.as_ref().map(|c| c.1.clone()),
+        point_count: s.points.len(),
+        w_pc: s.w_pc,
+        w_pen: s.w_pen,
+        w_mob: s.w_mob,
+        n_g: s.n_g,
+        tau: s.tau,
+        sampler: s.sampler.clone(),
+        steps: s.steps,
+        seed: s.seed,
+        samples: s.samples,
+        deadline_seconds: s.deadline_seconds,
+        preview_every: s.preview_every,
+        resolution: s.resolution,
+        guided: false,
+    }
+}
+
+fn preview_view(p: &Preview) -> PreviewView {
+    PreviewView {
+        parts: p
+            .parts
+            .iter()
+            .map(|q| PreviewPartView {
+                name: q.name.clone(),
+                center: q.center,
+                half_extents: q.half_extents,
+            })
+            .collect(),
+        joints: p
+            .joints
+            .iter()
+            .map(|j| PreviewJointView {
+                parent: j.parent,
+                child: j.child,
+                kind: j.kind.to_string(),
+                axis: j.axis,
+                origin: j.origin,
+            })
+            .collect(),
+    }
+}
+
+/// Wire form of progress.
+pub fn progress_view(p: &Progress) -> ProgressView {
+    ProgressView {
+        phase: p.phase.as_str().to_string(),
+        sample: p.sample,
+        samples: p.samples,
+        step: p.step,
+        total_steps: p.total_steps,
+        t: p.t,
+        eta_seconds: p.eta_seconds,
+        preview: p.preview.as_ref().map(preview_view),
+    }
+}
+
+/// Wire form of an artefact of job `id`.
+pub fn artifact_view(id: &str, a: &Artifact) -> ArtifactView {
+    ArtifactView {
+        name: a.name.clone(),
+        media_type: media_type(&a.name).to_string(),
+        size_bytes: a.size_bytes,
+        sha256: a.sha256.clone(),
+        href: format!("/v1/jobs/{id}/artifacts/{}", a.name),
+    }
+}
+
+/// Wire form of a job.
+pub fn job_view(r: &JobRecord, progress: Option<&Progress>, cancel_requested: bool) -> JobView {
+    JobView {
+        id: r.id.clone(),
+        name: format!("jobs/{}", r.id),
+        state: r.state.as_str().to_string(),
+        attempt: r.attempt,
+        sequence: r.sequence,
+        create_time_ms: r.created_ms,
+        start_time_ms: r.started_ms,
+        end_time_ms: r.ended_ms,
+        deadline_ms: r.deadline_ms,
+        cancel_requested: cancel_requested && !r.state.is_terminal(),
+        request: request_view(&r.spec),
+        progress: if r.state.is_terminal() {
+            None
+        } else {
+            progress.map(progress_view)
+        },
+        error: r.failure.as_ref().map(|f| JobErrorView {
+            error_type: f.error_type.clone(),
+            detail: f.detail.clone(),
+        }),
+        artifacts: r.artifacts.iter().map(|a| artifact_view(&r.id, a)).collect(),
+    }
+}

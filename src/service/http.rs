@@ -1,0 +1,664 @@
+//! The REST adapter (axum): `/v1/jobs…`, SSE progress, artefact downloads, and the admin
+//! listener (`/livez`, `/readyz`, `/metrics`).
+//!
+//! Why it exists: it maps HTTP onto [`Service`] and nothing more: bodies become a
+//! [`JobInput`](super::spec::JobInput), [`ServiceError`]s become RFC 9457 problem+json once (in
+//! [`IntoResponse`]), and SSE frames are built from the service's watch items. The OpenAPI
+//! document is generated from the annotations here ([`ApiDoc`]); `tests/openapi.rs` fails when
+//! the committed `openapi.yaml` drifts.
+
+use std::convert::Infallible;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use axum::body::Bytes;
+use axum::extract::rejection::BytesRejection;
+use axum::extract::{DefaultBodyLimit, Path, Query, RawQuery, State};
+use axum::http::{HeaderMap, HeaderValue, StatusCode, Uri, header};
+use axum::response::sse::{Event, KeepAlive, Sse};
+use axum::response::{IntoResponse, Response};
+use axum::routing::{get, post};
+use axum::{Json, Router};
+use serde::Deserialize;
+use sha2::{Digest, Sha256};
+use tokio_stream::StreamExt as _;
+use tokio_stream::wrappers::ReceiverStream;
+use utoipa::OpenApi;
+
+use super::api::{
+    ARTIFACT_NAMES, ArtifactView, FieldError, JobList, JobRequest, JobView, Problem,
+    UploadParams, media_type,
+};
+use super::auth::Tenants;
+use super::jobs::{Service, ServiceError, WatchItem};
+use super::spec::PointsInput;
+
+/// Shared state of the REST handlers.
+#[derive(Clone)]
+pub struct HttpState {
+    /// The job service.
+    pub svc: Arc<Service>,
+    /// Token table.
+    pub tenants: Arc<Tenants>,
+    /// Largest accepted body.
+    pub max_body_bytes: usize,
+}
+
+fn pointer(field: &str) -> String {
+    // `points[3][1]` → `/points/3/1`.
+    let mut p = String::from("/");
+    for c in field.chars() {
+        match c {
+            '[' | '.' => p.push('/'),
+            ']' => {}
+            c => p.push(c),
+        }
+    }
+    p
+}
+
+/// HTTP status of a service error.
+pub fn status_of(e: &ServiceError) -> StatusCode {
+    match e {
+        ServiceError::Invalid(_) | ServiceError::IdempotencyReused { .. } => {
+            StatusCode::UNPROCESSABLE_ENTITY
+        }
+        ServiceError::QueueFull { .. } => StatusCode::TOO_MANY_REQUESTS,
+        ServiceError::ShuttingDown { .. } => StatusCode::SERVICE_UNAVAILABLE,
+        ServiceError::NotFound(_) => StatusCode::NOT_FOUND,
+        ServiceError::Conflict { .. } => StatusCode::CONFLICT,
+        ServiceError::Unauthenticated(_) => StatusCode::UNAUTHORIZED,
+        ServiceError::Malformed(_) => StatusCode::BAD_REQUEST,
+        ServiceError::TooLarge { .. } => StatusCode::PAYLOAD_TOO_LARGE,
+        ServiceError::UnsupportedMediaType { .. } => StatusCode::UNSUPPORTED_MEDIA_TYPE,
+        ServiceError::Store(_) | ServiceError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
+    }
+}
+
+/// The problem document of a service error.
+pub fn problem_of(e: &ServiceError, instance: Option<String>) -> Problem {
+    let status = status_of(e);
+    let retry = match e {
+        ServiceError::QueueFull { retry_after, .. }
+        | ServiceError::ShuttingDown { retry_after } => Some(*retry_after),
+        _ => None,
+    };
+    let errors = match e {
+        ServiceError::Invalid(v) => vec![FieldError {
+            pointer: pointer(&v.field),
+            field: v.field.clone(),
+            limit: v.limit.clone(),
+            value: v.value.clone(),
+            detail: v.to_string(),
+        }],
+        _ => Vec::new(),
+    };
+    let detail = match e {
+        // Never leak internals beyond the message; the log has the rest.
+        ServiceError::Store(_) => "the job store failed; see the server log".to_string(),
+        other => other.to_string(),
+    };
+    Problem {
+        problem_type: format!("/problems/{}", e.error_type()),
+        title: status.canonical_reason().unwrap_or("Error").to_string(),
+        status: status.as_u16(),
+        detail,
+        instance,
+        errors,
+        retry_after_seconds: retry,
+    }
+}
+
+/// A service error with the request path, rendered as problem+json.
+pub struct ApiError(pub ServiceError, pub Option<String>);
+
+impl From<ServiceError> for ApiError {
+    fn from(e: ServiceError) -> Self {
+        ApiError(e, None)
+    }
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        let p = problem_of(&self.0, self.1);
+        if p.status >= 500 {
+            tracing::error!(error = %self.0, "request failed");
+        }
+        let mut r = (
+            StatusCode::from_u16(p.status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR),
+            [(header::CONTENT_TYPE, "application/problem+json")],
+            serde_json::to_string(&p).unwrap_or_default(),
+        )
+            .into_response();
+        if let Some(s) = p.retry_after_seconds {
+            r.headers_mut()
+                .insert(header::RETRY_AFTER, HeaderValue::from(s));
+        }
+        if p.status == 401 {
+            r.headers_mut()
+                .insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
+        }
+        r
+    }
+}
+
+type ApiResult<T> = Result<T, ApiError>;
+
+fn tenant(st: &HttpState, headers: &HeaderMap) -> Result<String, ServiceError> {
+    st.tenants.resolve(
+        headers
+            .get(header::AUTHORIZATION)
+            .and_then(|v| v.to_str().ok()),
+    )
+}
+
+fn at(uri: &Uri) -> impl Fn(ServiceError) -> ApiError + '_ {
+    move |e| ApiError(e, Some(uri.path().to_string()))
+}
+
+/// Submit a job.
+#[utoipa::path(
+    post, path = "/v1/jobs", tag = "jobs",
+    params(
+        ("Idempotency-Key" = Option<String>, Header, description = "Retry-safe submission: the same key and body return the same job"),
+        UploadParams
+    ),
+    request_body(content(
+        (JobRequest = "application/json"),
+        (Vec<u8> = "application/x-ply"),
+        (Vec<u8> = "application/x-npy"),
+        (Vec<u8> = "application/octet-stream")
+    ), description = "A JSON job request, or a raw point-cloud upload (PLY, NPY, or little-endian f32 triples) with the knobs as query parameters"),
+    responses(
+        (status = 202, description = "Accepted; `Location` names the job", body = JobView),
+        (status = 400, description = "Malformed body", body = Problem, content_type = "application/problem+json"),
+        (status = 401, description = "Missing or unknown bearer token", body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "Body too large", body = Problem, content_type = "application/problem+json"),
+        (status = 415, description = "Unsupported content type", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "A field broke a limit (field, limit and value named), or the Idempotency-Key was reused with another body", body = Problem, content_type = "application/problem+json"),
+        (status = 429, description = "Queue full; see Retry-After", body = Problem, content_type = "application/problem+json"),
+        (status = 503, description = "Shutting down; see Retry-After", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+async fn submit(
+    State(st): State<HttpState>,
+    uri: Uri,
+    headers: HeaderMap,
+    RawQuery(query): RawQuery,
+    body: Result<Bytes, BytesRejection>,
+) -> ApiResult<Response> {
+    let err = at(&uri);
+    let tenant = tenant(&st, &headers).map_err(&err)?;
+    let body = body.map_err(|r| {
+        err(if r.status() == StatusCode::PAYLOAD_TOO_LARGE {
+            ServiceError::TooLarge {
+                limit: st.max_body_bytes,
+            }
+        } else {
+            ServiceError::Malformed(r.body_text())
+        })
+    })?;
+    let ctype = headers
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("")
+        .split(';')
+        .next()
+        .unwrap_or("")
+        .trim()
+        .to_ascii_lowercase();
+    let upload = |points: PointsInput| -> Result<_, ServiceError> {
+        let q = query.clone().unwrap_or_default();
+        let params: UploadParams = serde_urlencoded_parse(&q)?;
+        Ok(params.into_input(points))
+    };
+    let input = match ctype.as_str() {
+        "application/json" => {
+            let de = &mut serde_json::Deserializer::from_slice(&body);
+            let req: JobRequest = serde_path_to_error::deserialize(de)
+                .map_err(|e| err(ServiceError::Malformed(e.to_string())))?;
+            req.into_input().map_err(|v| err(v.into()))?
+        }
+        "application/x-ply" | "application/ply" | "model/x-ply" => {
+            upload(PointsInput::Ply(body.to_vec())).map_err(&err)?
+        }
+        "application/x-npy" | "application/npy" => {
+            upload(PointsInput::Npy(body.to_vec())).map_err(&err)?
+        }
+        "application/octet-stream" => upload(PointsInput::F32Le(body.to_vec())).map_err(&err)?,
+        other => {
+            return Err(err(ServiceError::UnsupportedMediaType {
+                got: other.to_string(),
+                expected: "application/json, application/x-ply, application/x-npy or application/octet-stream",
+            }));
+        }
+    };
+    let idem = match headers.get("idempotency-key") {
+        None => None,
+        Some(v) => {
+            let key = v
+                .to_str()
+                .ok()
+                .filter(|k| !k.is_empty() && k.len() <= 255)
+                .ok_or_else(|| {
+                    err(ServiceError::Invalid(super::spec::Violation {
+                        field: "Idempotency-Key".into(),
+                        limit: "1..=255 visible ASCII characters".into(),
+                        value: format!("{} bytes", v.len()),
+                    }))
+                })?;
+            let mut h = Sha256::new();
+            h.update(ctype.as_bytes());
+            h.update([0]);
+            h.update(query.as_deref().unwrap_or("").as_bytes());
+            h.update([0]);
+            h.update(&body);
+            Some((key.to_string(), format!("{:x}", h.finalize())))
+        }
+    };
+    let (job, _created) = st.svc.submit(&tenant, input, idem).await.map_err(&err)?;
+    let location = format!("/v1/jobs/{}", job.id);
+    Ok((
+        StatusCode::ACCEPTED,
+        [(header::LOCATION, location)],
+        Json(job),
+    )
+        .into_response())
+}
+
+fn serde_urlencoded_parse(q: &str) -> Result<UploadParams, ServiceError> {
+    // axum's Query extractor uses serde_urlencoded; going through `Query::try_from_uri` keeps
+    // the same parser without a direct dependency.
+    let uri: Uri = format!("/?{q}")
+        .parse()
+        .map_err(|e| ServiceError::Malformed(format!("query string: {e}")))?;
+    Query::<UploadParams>::try_from_uri(&uri)
+        .map(|q| q.0)
+        .map_err(|e| ServiceError::Malformed(e.body_text()))
+}
+
+/// Get a job.
+#[utoipa::path(
+    get, path = "/v1/jobs/{id}", tag = "jobs",
+    params(("id" = String, Path, description = "Job id")),
+    responses(
+        (status = 200, body = JobView),
+        (status = 404, description = "No such job for this tenant", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+async fn get_job(
+    State(st): State<HttpState>,
+    uri: Uri,
+    headers: HeaderMap,
+    Path(id): Path<String>,
+) -> ApiResult<Json<JobView>> {
+    let err = at(&uri);
+    let tenant = tenant(&st, &headers).map_err(&err)?;
+    Ok(Json(st.svc.get(&tenant, &id).await.map_err(&err)?))
+}
+
+/// Paging parameters.
+#[derive(Debug, Deserialize, utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
+struct ListParams {
+    /// Jobs per page (1–500, default 50).
+    page_size: Option<usize>,
+    /// `next_page_token` of the previous page.
+    page_token: Option<String>,
+}
+
+/// List the tenant's jobs, oldest first.
+#[utoipa::path(
+    get, path = "/v1/jobs", tag = "jobs",
+    params(ListParams),
+    responses((status = 200, body = JobList))
+)]
+async fn list_jobs(
+    State(st): State<HttpState>,
+    uri: Uri,
+    headers: HeaderMap,
+    q: Result<Query<ListParams>, axum::extract::rejection::QueryRejection>,
+) -> ApiResult<Json<JobList>> {
+    let err = at(&uri);
+    let tenant = tenant(&st, &headers).map_err(&err)?;
+    let Query(q) = q.map_err(|e| err(ServiceError::Malformed(e.body_text())))?;
+    Ok(Json(
+        st.svc
+            .list(&tenant, q.page_size.unwrap_or(50), q.page_token.as_deref())
+            .await
+            .map_err(&err)?,
+    ))
+}
+
+/// Cancel a job (queued: at once; running: at the next diffusion step).
+#[utoipa::path(
+    post, path = "/v1/jobs/{id}/cancel", tag = "jobs",
+    params(("id" = String, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "The job (CANCELLED, or RUNNING with cancel_requested)", body = JobView),
+        (status = 404, body = Problem, content_type = "application/problem+json"),
+        (status = 409, description = "Already finished", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+async fn cancel_job(
+    State(st): State<HttpState>,
+    uri: Uri,
+    headers: HeaderMap,
+    Path(id): Path<String>,
+) -> ApiResult<Json<JobView>> {
+    let err = at(&uri);
+    let tenant = tenant(&st, &headers).map_err(&err)?;
+    Ok(Json(st.svc.cancel(&tenant, &id).await.map_err(&err)?))
+}
+
+/// Delete a finished job and its artefacts.
+#[utoipa::path(
+    delete, path = "/v1/jobs/{id}", tag = "jobs",
+    params(("id" = String, Path, description = "Job id")),
+    responses(
+        (status = 204, description = "Deleted"),
+        (status = 404, body = Problem, content_type = "application/problem+json"),
+        (status = 409, description = "Not finished", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+async fn delete_job(
+    State(st): State<HttpState>,
+    uri: Uri,
+    headers: HeaderMap,
+    Path(id): Path<String>,
+) -> ApiResult<StatusCode> {
+    let err = at(&uri);
+    let tenant = tenant(&st, &headers).map_err(&err)?;
+    st.svc.delete(&tenant, &id).await.map_err(&err)?;
+    Ok(StatusCode::NO_CONTENT)
+}
+
+/// Resume point of an event stream.
+#[derive(Debug, Deserialize, utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
+struct EventsParams {
+    /// Replay events after this sequence (the `Last-Event-ID` header wins when both are given).
+    after: Option<u64>,
+}
+
+/// Server-sent events of a job: `state`, `progress`, `artifact`, `done` (then the stream
+/// closes), `shutdown` (server draining; reconnect with Last-Event-ID). Every event's `id` is
+/// the last persisted sequence, so a reconnect with `Last-Event-ID` loses no state event.
+/// Progress is not replayed: a resumed stream gets the latest progress.
+#[utoipa::path(
+    get, path = "/v1/jobs/{id}/events", tag = "jobs",
+    params(
+        ("id" = String, Path, description = "Job id"),
+        ("Last-Event-ID" = Option<u64>, Header, description = "Resume after this sequence"),
+        EventsParams
+    ),
+    responses(
+        (status = 200, description = "text/event-stream", content_type = "text/event-stream", body = String),
+        (status = 204, description = "The client has already seen the terminal event"),
+        (status = 404, body = Problem, content_type = "application/problem+json"),
+    )
+)]
+async fn events(
+    State(st): State<HttpState>,
+    uri: Uri,
+    headers: HeaderMap,
+    Path(id): Path<String>,
+    q: Result<Query<EventsParams>, axum::extract::rejection::QueryRejection>,
+) -> ApiResult<Response> {
+    let err = at(&uri);
+    let tenant = tenant(&st, &headers).map_err(&err)?;
+    let Query(q) = q.map_err(|e| err(ServiceError::Malformed(e.body_text())))?;
+    let after = match headers.get("last-event-id") {
+        Some(v) => v
+            .to_str()
+            .ok()
+            .and_then(|s| s.trim().parse::<u64>().ok())
+            .ok_or_else(|| {
+                err(ServiceError::Invalid(super::spec::Violation {
+                    field: "Last-Event-ID".into(),
+                    limit: "a non-negative integer sequence".into(),
+                    value: format!("{v:?}"),
+                }))
+            })?,
+        None => q.after.unwrap_or(0),
+    };
+    let job = st.svc.get(&tenant, &id).await.map_err(&err)?;
+    let terminal = matches!(job.state.as_str(), "SUCCEEDED" | "FAILED" | "CANCELLED");
+    if terminal && after >= job.sequence {
+        return Ok(StatusCode::NO_CONTENT.into_response());
+    }
+    let rx = st.svc.watch(&tenant, &id, after).await.map_err(&err)?;
+    let stream = ReceiverStream::new(rx).map(|item| {
+        let ev = match item {
+            WatchItem::Stored(e) => Event::default()
+                .id(e.sequence.to_string())
+                .event(e.kind)
+                .data(e.data),
+            WatchItem::Progress { sequence, progress } => Event::default()
+                .id(sequence.to_string())
+                .event("progress")
+                .data(serde_json::to_string(&progress).unwrap_or_default()),
+            WatchItem::Shutdown { sequence } => Event::default()
+                .id(sequence.to_string())
+                .event("shutdown")
+                .data("{}"),
+        };
+        Ok::<_, Infallible>(ev)
+    });
+    let mut r = Sse::new(stream)
+        .keep_alive(KeepAlive::new().interval(Duration::from_secs(15)))
+        .into_response();
+    r.headers_mut()
+        .insert(header::CACHE_CONTROL, HeaderValue::from_static("no-cache"));
+    r.headers_mut()
+        .insert("x-accel-buffering", HeaderValue::from_static("no"));
+    Ok(r)
+}
+
+/// List a finished job's artefacts.
+#[utoipa::path(
+    get, path = "/v1/jobs/{id}/artifacts", tag = "jobs",
+    params(("id" = String, Path, description = "Job id")),
+    responses(
+        (status = 200, body = Vec<ArtifactView>),
+        (status = 409, description = "Not finished", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+async fn list_artifacts(
+    State(st): State<HttpState>,
+    uri: Uri,
+    headers: HeaderMap,
+    Path(id): Path<String>,
+) -> ApiResult<Json<Vec<ArtifactView>>> {
+    let err = at(&uri);
+    let tenant = tenant(&st, &headers).map_err(&err)?;
+    let job = st.svc.get(&tenant, &id).await.map_err(&err)?;
+    if job.state != "SUCCEEDED" {
+        return Err(err(ServiceError::Conflict {
+            kind: "job-not-finished",
+            detail: format!("job {id} is {}; artefacts exist once it SUCCEEDED", job.state),
+        }));
+    }
+    Ok(Json(job.artifacts))
+}
+
+/// Download an artefact: `model.glb` (model/gltf-binary), `robot.zip` (URDF + OBJ meshes),
+/// `object.json` (physnap.object/v1).
+#[utoipa::path(
+    get, path = "/v1/jobs/{id}/artifacts/{name}", tag = "jobs",
+    params(
+        ("id" = String, Path, description = "Job id"),
+        ("name" = String, Path, description = "model.glb, robot.zip or object.json")
+    ),
+    responses(
+        (status = 200, description = "The file; ETag is its sha256", body = Vec<u8>, content_type = "application/octet-stream"),
+        (status = 404, body = Problem, content_type = "application/problem+json"),
+        (status = 409, description = "Not finished", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+async fn get_artifact(
+    State(st): State<HttpState>,
+    uri: Uri,
+    headers: HeaderMap,
+    Path((id, name)): Path<(String, String)>,
+) -> ApiResult<Response> {
+    let err = at(&uri);
+    let tenant = tenant(&st, &headers).map_err(&err)?;
+    if !ARTIFACT_NAMES.contains(&name.as_str()) {
+        return Err(err(ServiceError::NotFound(format!("{id}/artifacts/{name}"))));
+    }
+    let (path, a) = st.svc.artifact(&tenant, &id, &name).await.map_err(&err)?;
+    let etag = format!("\"{}\"", a.sha256);
+    if headers
+        .get(header::IF_NONE_MATCH)
+        .is_some_and(|v| v.as_bytes() == etag.as_bytes())
+    {
+        return Ok(StatusCode::NOT_MODIFIED.into_response());
+    }
+    let bytes = tokio::task::spawn_blocking(move || std::fs::read(path))
+        .await
+        .map_err(|e| err(ServiceError::Internal(e.to_string())))?
+        .map_err(|e| err(ServiceError::Internal(format!("reading artefact: {e}"))))?;
+    Ok((
+        [
+            (header::CONTENT_TYPE, media_type(&name).to_string()),
+            (header::ETAG, etag),
+            (
+                header::CONTENT_DISPOSITION,
+                format!("attachment; filename=\"{name}\""),
+            ),
+        ],
+        bytes,
+    )
+        .into_response())
+}
+
+/// Categories the loaded weights know (index = position).
+#[utoipa::path(
+    get, path = "/v1/categories", tag = "jobs",
+    responses((status = 200, body = Vec<String>))
+)]
+async fn categories(State(st): State<HttpState>) -> Json<Vec<String>> {
+    Json(st.svc.caps().categories.clone())
+}
+
+async fn not_found(uri: Uri) -> ApiError {
+    ApiError(
+        ServiceError::NotFound(uri.path().to_string()),
+        Some(uri.path().to_string()),
+    )
+}
+
+/// The OpenAPI document of the REST API.
+#[derive(OpenApi)]
+#[openapi(
+    info(
+        title = "physnap job service",
+        description = "Articulated-object generation jobs (PhysNAP). Jobs are resources: submit, watch (SSE), download. Point-cloud guidance is not applied yet: the cloud and loss weights are validated and stored, generation is unconditional on them.",
+        license(name = "MIT OR Apache-2.0")
+    ),
+    paths(submit, get_job, list_jobs, cancel_job, delete_job, events, list_artifacts, get_artifact, categories),
+    components(schemas(JobRequest, JobView, JobList, Problem, FieldError, ArtifactView)),
+    modifiers(&Security),
+    security(("bearer" = []))
+)]
+pub struct ApiDoc;
+
+struct Security;
+
+impl utoipa::Modify for Security {
+    fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
+        use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
+        let c = openapi.components.get_or_insert_with(Default::default);
+        c.add_security_scheme(
+            "bearer",
+            SecurityScheme::Http(HttpBuilder::new().scheme(HttpAuthScheme::Bearer).build()),
+        );
+    }
+}
+
+/// The OpenAPI document as committed in `openapi.yaml` (JSON is valid YAML 1.2).
+pub fn openapi_document() -> String {
+    let mut s = ApiDoc::openapi()
+        .to_pretty_json()
+        .unwrap_or_else(|e| format!("# failed to render: {e}"));
+    s.push('\n');
+    s
+}
+
+/// The public REST router.
+pub fn router(st: HttpState) -> Router {
+    let limit = st.max_body_bytes;
+    Router::new()
+        .route("/v1/jobs", post(submit).get(list_jobs))
+        .route("/v1/jobs/{id}", get(get_job).delete(delete_job))
+        .route("/v1/jobs/{id}/cancel", post(cancel_job))
+        .route("/v1/jobs/{id}/events", get(events))
+        .route("/v1/jobs/{id}/artifacts", get(list_artifacts))
+        .route("/v1/jobs/{id}/artifacts/{name}", get(get_artifact))
+        .route("/v1/categories", get(categories))
+        .fallback(not_found)
+        .layer(DefaultBodyLimit::max(limit))
+        .with_state(st)
+}
+
+/// The admin router: liveness, readiness (503 while draining) and Prometheus metrics.
+pub fn admin_router(svc: Arc<Service>) -> Router {
+    Router::new()
+        .route("/livez", get(|| async { "ok\n" }))
+        .route(
+            "/readyz",
+            get(|State(svc): State<Arc<Service>>| async move {
+                if svc.is_draining() {
+                    (StatusCode::SERVICE_UNAVAILABLE, "draining\n")
+                } else {
+                    (StatusCode::OK, "ready\n")
+                }
+            }),
+        )
+        .route("/metrics", get(metrics))
+        .with_state(svc)
+}
+
+async fn metrics(State(svc): State<Arc<Service>>) -> Response {
+    use std::fmt::Write as _;
+    let m = &svc.metrics;
+    let mut s = String::new();
+    let mut counter = |name: &str, help: &str, v: u64| {
+        let _ = writeln!(s, "# HELP {name} {help}\n# TYPE {name} counter\n{name} {v}");
+    };
+    counter("physnap_jobs_submitted_total", "Jobs admitted.", m.submitted.load(Ordering::Relaxed));
+    counter("physnap_jobs_succeeded_total", "Jobs that succeeded.", m.succeeded.load(Ordering::Relaxed));
+    counter("physnap_jobs_failed_total", "Jobs that failed.", m.failed.load(Ordering::Relaxed));
+    counter("physnap_jobs_cancelled_total", "Jobs cancelled.", m.cancelled.load(Ordering::Relaxed));
+    counter("physnap_jobs_recovered_total", "Jobs re-queued at start-up.", m.recovered.load(Ordering::Relaxed));
+    counter("physnap_diffusion_steps_total", "Diffusion steps run.", m.steps.load(Ordering::Relaxed));
+    let _ = writeln!(
+        s,
+        "# HELP physnap_jobs_rejected_total Submissions refused.\n# TYPE physnap_jobs_rejected_total counter\n\
+         physnap_jobs_rejected_total{{reason=\"invalid\"}} {}\n\
+         physnap_jobs_rejected_total{{reason=\"queue_full\"}} {}\n\
+         physnap_jobs_rejected_total{{reason=\"draining\"}} {}",
+        m.rejected_invalid.load(Ordering::Relaxed),
+        m.rejected_full.load(Ordering::Relaxed),
+        m.rejected_draining.load(Ordering::Relaxed)
+    );
+    let _ = writeln!(
+        s,
+        "# HELP physnap_job_run_seconds_sum Wall time of successful jobs.\n# TYPE physnap_job_run_seconds_sum counter\nphysnap_job_run_seconds_sum {:.3}",
+        m.run_seconds_sum_ms.load(Ordering::Relaxed) as f64 / 1000.0
+    );
+    let _ = writeln!(
+        s,
+        "# HELP physnap_jobs_queued Jobs waiting.\n# TYPE physnap_jobs_queued gauge\nphysnap_jobs_queued {}\n\
+         # HELP physnap_jobs_running Jobs running.\n# TYPE physnap_jobs_running gauge\nphysnap_jobs_running {}",
+        svc.queued(),
+        svc.running()
+    );
+    (
+        [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
+        s,
+    )
+        .into_response()
+}

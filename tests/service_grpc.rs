@@ -1,0 +1,240 @@
+//! The gRPC API (tonic generated client) against a real server on ephemeral loopback ports:
+//! submit → WatchJob → GetArtifact, resume by sequence, INVALID_ARGUMENT, health, reflection.
+
+mod support;
+
+use physnap::service::grpc::pb::{self, job_service_client::JobServiceClient};
+use sha2::{Digest, Sha256};
+use support::{Opts, cloud, start};
+use tokio_stream::StreamExt as _;
+
+fn spec(points: Vec<f32>) -> pb::JobSpec {
+    pb::JobSpec {
+        points: Some(pb::job_spec::Points::Xyz(pb::FlatPoints { values: points })),
+        category: "Laptop".into(),
+        seed: Some(9),
+        preview_every: Some(500),
+        ..Default::default()
+    }
+}
+
+async fn watch(
+    cl: &mut JobServiceClient<tonic::transport::Channel>,
+    id: &str,
+    after: u64,
+) -> Vec<pb::JobEvent> {
+    let mut stream = cl
+        .watch_job(pb::WatchJobRequest {
+            id: id.into(),
+            after_sequence: after,
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    let mut out = Vec::new();
+    while let Some(e) = stream.next().await {
+        out.push(e.unwrap());
+    }
+    out
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn submit_watch_get_artifact() {
+    let s = start(Opts::default()).await;
+    let mut cl = JobServiceClient::connect(s.grpc_url()).await.unwrap();
+    let flat: Vec<f32> = cloud(48).into_iter().flatten().collect();
+    let job = cl
+        .submit_job(pb::SubmitJobRequest {
+            spec: Some(spec(flat.clone())),
+            request_id: "req-1".into(),
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(job.state, pb::State::Queued as i32);
+    // The same request id and spec is the same job.
+    let again = cl
+        .submit_job(pb::SubmitJobRequest {
+            spec: Some(spec(flat.clone())),
+            request_id: "req-1".into(),
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(again.id, job.id);
+
+    let evs = watch(&mut cl, &job.id, 0).await;
+    let last = evs.last().unwrap();
+    assert_eq!(last.kind, "done");
+    assert_eq!(last.state, pb::State::Succeeded as i32);
+    assert!(evs.iter().any(|e| e.kind == "progress"));
+    let persisted: Vec<u64> = evs
+        .iter()
+        .filter(|e| e.kind != "progress")
+        .map(|e| e.sequence)
+        .collect();
+    assert_eq!(persisted, (1..=persisted.len() as u64).collect::<Vec<_>>());
+    // Resume after sequence 2: exactly the rest.
+    let rest: Vec<u64> = watch(&mut cl, &job.id, 2)
+        .await
+        .iter()
+        .filter(|e| e.kind != "progress")
+        .map(|e| e.sequence)
+        .collect();
+    assert_eq!(rest, persisted[2..].to_vec());
+
+    let done = cl
+        .get_job(pb::GetJobRequest { id: job.id.clone() })
+        .await
+        .unwrap()
+        .into_inner();
+    let view: serde_json::Value = serde_json::from_str(&done.json).unwrap();
+    let want = view["artifacts"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|a| a["name"] == "model.glb")
+        .unwrap()["sha256"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let mut chunks = cl
+        .get_artifact(pb::GetArtifactRequest {
+            id: job.id.clone(),
+            name: "model.glb".into(),
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    let (mut bytes, mut sha) = (Vec::new(), String::new());
+    while let Some(c) = chunks.next().await {
+        let c = c.unwrap();
+        assert_eq!(c.offset as usize, bytes.len());
+        bytes.extend_from_slice(&c.data);
+        if !c.sha256.is_empty() {
+            sha = c.sha256;
+        }
+    }
+    assert_eq!(&bytes[..4], b"glTF");
+    assert_eq!(format!("{:x}", Sha256::digest(&bytes)), want);
+    assert_eq!(sha, want);
+
+    let list = cl
+        .list_jobs(pb::ListJobsRequest::default())
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(list.jobs.len(), 1);
+
+    // Bad input: INVALID_ARGUMENT naming field, limit and value; nothing stored.
+    let mut bad = flat.clone();
+    bad[7] = f32::NAN;
+    let e = cl
+        .submit_job(pb::SubmitJobRequest {
+            spec: Some(spec(bad)),
+            request_id: String::new(),
+        })
+        .await
+        .unwrap_err();
+    assert_eq!(e.code(), tonic::Code::InvalidArgument);
+    assert!(e.message().contains("points[2][1]"), "{}", e.message());
+    assert_eq!(e.metadata().get("physnap-field").unwrap(), "points[2][1]");
+    assert_eq!(e.metadata().get("physnap-limit").unwrap(), "finite");
+    let mut neg = spec(flat.clone());
+    neg.w_mob = Some(-1.0);
+    let e = cl
+        .submit_job(pb::SubmitJobRequest {
+            spec: Some(neg),
+            request_id: String::new(),
+        })
+        .await
+        .unwrap_err();
+    assert_eq!(e.code(), tonic::Code::InvalidArgument);
+    assert!(e.message().contains("w_mob") && e.message().contains("-1"), "{}", e.message());
+    let mut cat = spec(flat.clone());
+    cat.category = "Spaceship".into();
+    let e = cl
+        .submit_job(pb::SubmitJobRequest {
+            spec: Some(cat),
+            request_id: String::new(),
+        })
+        .await
+        .unwrap_err();
+    assert_eq!(e.code(), tonic::Code::InvalidArgument);
+    let e = cl
+        .submit_job(pb::SubmitJobRequest {
+            spec: Some(pb::JobSpec {
+                points: Some(pb::job_spec::Points::Ply(b"ply\ngarbage".to_vec())),
+                ..Default::default()
+            }),
+            request_id: String::new(),
+        })
+        .await
+        .unwrap_err();
+    assert_eq!(e.code(), tonic::Code::InvalidArgument);
+    let list = cl
+        .list_jobs(pb::ListJobsRequest::default())
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(list.jobs.len(), 1, "a rejected job was stored");
+    let e = cl
+        .get_job(pb::GetJobRequest { id: "nope".into() })
+        .await
+        .unwrap_err();
+    assert_eq!(e.code(), tonic::Code::NotFound);
+
+    // Standard health service.
+    let mut health = tonic_health::pb::health_client::HealthClient::connect(s.grpc_url())
+        .await
+        .unwrap();
+    let h = health
+        .check(tonic_health::pb::HealthCheckRequest {
+            service: "physnap.v1.JobService".into(),
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(
+        h.status,
+        tonic_health::pb::health_check_response::ServingStatus::Serving as i32
+    );
+    s.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn queue_full_is_resource_exhausted() {
+    let s = start(Opts {
+        queue_capacity: 1,
+        ..Default::default()
+    })
+    .await;
+    let mut cl = JobServiceClient::connect(s.grpc_url()).await.unwrap();
+    let flat: Vec<f32> = cloud(20).into_iter().flatten().collect();
+    let mut long = spec(flat);
+    long.samples = Some(16);
+    let mut ids = Vec::new();
+    let mut exhausted = None;
+    for _ in 0..4 {
+        match cl
+            .submit_job(pb::SubmitJobRequest {
+                spec: Some(long.clone()),
+                request_id: String::new(),
+            })
+            .await
+        {
+            Ok(j) => ids.push(j.into_inner().id),
+            Err(e) => {
+                exhausted = Some(e);
+                break;
+            }
+        }
+    }
+    let e = exhausted.expect("the queue never filled");
+    assert_eq!(e.code(), tonic::Code::ResourceExhausted);
+    assert_eq!(e.metadata().get("retry-after").unwrap(), "7");
+    for id in ids {
+        cl.cancel_job(pb::CancelJobRequest { id }).await.unwrap();
+    }
+    s.shutdown().await;
+}

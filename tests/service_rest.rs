@@ -1,0 +1,645 @@
+//! The REST API against a real server on ephemeral loopback ports, with tiny real weights: the
+//! whole engine path (denoiser, projection, shape decoder, meshing, GLB export) runs.
+
+mod common;
+mod support;
+
+use std::time::{Duration, Instant};
+
+use base64::Engine as _;
+use serde_json::{Value, json};
+use sha2::{Digest, Sha256};
+use support::{Opts, SseReader, cloud, f32le, problem, start};
+
+fn client() -> reqwest::Client {
+    reqwest::Client::builder()
+        .timeout(Duration::from_secs(120))
+        .build()
+        .unwrap()
+}
+
+fn points_json(n: usize) -> Value {
+    json!(cloud(n))
+}
+
+async fn submit(c: &reqwest::Client, url: &str, body: Value) -> reqwest::Response {
+    c.post(url).json(&body).send().await.unwrap()
+}
+
+async fn wait_state(c: &reqwest::Client, url: &str, want: &[&str]) -> Value {
+    let t0 = Instant::now();
+    loop {
+        let j: Value = c.get(url).send().await.unwrap().json().await.unwrap();
+        if want.contains(&j["state"].as_str().unwrap()) {
+            return j;
+        }
+        assert!(t0.elapsed() < Duration::from_secs(90), "stuck: {j:#}");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn submit_stream_download_validate_resume() {
+    let s = start(Opts::default()).await;
+    let c = client();
+    let r = submit(
+        &c,
+        &s.url("/v1/jobs"),
+        json!({"points": points_json(64), "category": "Laptop", "seed": 5,
+               "preview_every": 250, "resolution": 16}),
+    )
+    .await;
+    assert_eq!(r.status(), 202);
+    let loc = r.headers()["location"].to_str().unwrap().to_string();
+    let job: Value = r.json().await.unwrap();
+    let id = job["id"].as_str().unwrap().to_string();
+    assert_eq!(loc, format!("/v1/jobs/{id}"));
+    assert_eq!(job["request"]["seed"], 5);
+    assert_eq!(job["request"]["category"], "Laptop");
+    assert_eq!(job["request"]["point_count"], 64);
+    assert_eq!(job["request"]["guided"], false);
+
+    // The whole event stream, from the start.
+    let r = c.get(s.url(&format!("{loc}/events"))).send().await.unwrap();
+    assert_eq!(r.headers()["x-accel-buffering"], "no");
+    let evs = SseReader::new(r).collect().await;
+    let kinds: Vec<&str> = evs.iter().map(|e| e.event.as_str()).collect();
+    assert_eq!(kinds.first(), Some(&"state"), "{kinds:?}");
+    assert_eq!(kinds.last(), Some(&"done"), "{kinds:?}");
+    let states: Vec<String> = evs
+        .iter()
+        .filter(|e| e.event == "state")
+        .map(|e| e.json()["state"].as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(states, ["QUEUED", "RUNNING", "SUCCEEDED"]);
+    assert_eq!(
+        evs.iter().filter(|e| e.event == "artifact").count(),
+        3,
+        "{kinds:?}"
+    );
+    let progress: Vec<Value> = evs
+        .iter()
+        .filter(|e| e.event == "progress")
+        .map(|e| e.json())
+        .collect();
+    assert!(!progress.is_empty(), "no progress events: {kinds:?}");
+    for p in &progress {
+        assert_eq!(p["total_steps"], 1000);
+        assert!(p["step"].as_u64().unwrap() >= 1);
+        assert!(["denoising", "meshing", "exporting"].contains(&p["phase"].as_str().unwrap()));
+    }
+    assert!(progress.iter().any(|p| p["eta_seconds"].is_number()));
+    let preview = progress
+        .iter()
+        .find(|p| p.get("preview").is_some())
+        .expect("a progress event with an x̂₀ preview");
+    assert!(preview["step"].as_u64().unwrap() % 250 == 0 || preview["step"] == 1000);
+    assert!(!preview["preview"]["parts"].as_array().unwrap().is_empty());
+    // Persisted events carry contiguous sequences 1..=N; progress ids repeat the last one.
+    let persisted: Vec<u64> = evs
+        .iter()
+        .filter(|e| e.event != "progress")
+        .map(|e| e.seq())
+        .collect();
+    assert_eq!(persisted, (1..=persisted.len() as u64).collect::<Vec<_>>());
+
+    // Artefacts: GLB passes the Khronos validator; bytes match the advertised sha256.
+    let done = evs.last().unwrap().json();
+    assert_eq!(done["state"], "SUCCEEDED");
+    let glb_meta = done["artifacts"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|a| a["name"] == "model.glb")
+        .unwrap()
+        .clone();
+    assert_eq!(glb_meta["media_type"], "model/gltf-binary");
+    let r = c
+        .get(s.url(glb_meta["href"].as_str().unwrap()))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(r.headers()["content-type"], "model/gltf-binary");
+    let glb = r.bytes().await.unwrap();
+    assert_eq!(
+        format!("{:x}", Sha256::digest(&glb)),
+        glb_meta["sha256"].as_str().unwrap()
+    );
+    let path = s.root.path().join("downloaded.glb");
+    std::fs::write(&path, &glb).unwrap();
+    let report = common::gltf_validate(&path);
+    assert_eq!(report["numErrors"], 0, "{report:#}");
+    for name in ["robot.zip", "object.json"] {
+        let r = c
+            .get(s.url(&format!("{loc}/artifacts/{name}")))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 200, "{name}");
+    }
+    let obj: Value = c
+        .get(s.url(&format!("{loc}/artifacts/object.json")))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(obj["category"], "Laptop");
+
+    // Resume: after any persisted id, the replay is exactly the rest of the log.
+    let last = *persisted.last().unwrap();
+    for after in [0, 1, 2, last - 1] {
+        let r = c
+            .get(s.url(&format!("{loc}/events")))
+            .header("last-event-id", after.to_string())
+            .send()
+            .await
+            .unwrap();
+        let replay: Vec<u64> = SseReader::new(r)
+            .collect()
+            .await
+            .iter()
+            .filter(|e| e.event != "progress")
+            .map(|e| e.seq())
+            .collect();
+        assert_eq!(replay, ((after + 1)..=last).collect::<Vec<_>>(), "after {after}");
+    }
+    // Already saw the terminal event: 204 stops EventSource reconnecting.
+    let r = c
+        .get(s.url(&format!("{loc}/events")))
+        .header("last-event-id", last.to_string())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 204);
+
+    // Same seed, same request → the same bytes (a second job).
+    let r = submit(
+        &c,
+        &s.url("/v1/jobs"),
+        json!({"points": points_json(64), "category": "Laptop", "seed": 5, "resolution": 16}),
+    )
+    .await;
+    let j2: Value = r.json().await.unwrap();
+    let j2 = wait_state(
+        &c,
+        &s.url(&format!("/v1/jobs/{}", j2["id"].as_str().unwrap())),
+        &["SUCCEEDED"],
+    )
+    .await;
+    let sha2 = j2["artifacts"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|a| a["name"] == "model.glb")
+        .unwrap()["sha256"]
+        .clone();
+    assert_eq!(sha2, glb_meta["sha256"]);
+
+    // Listing pages through both jobs; delete removes a finished job.
+    let page: Value = c
+        .get(s.url("/v1/jobs?page_size=1"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(page["jobs"].as_array().unwrap().len(), 1);
+    assert_eq!(page["jobs"][0]["id"], id.as_str());
+    let tok = page["next_page_token"].as_str().unwrap();
+    let page2: Value = c
+        .get(s.url(&format!("/v1/jobs?page_size=1&page_token={tok}")))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(page2["jobs"][0]["id"], j2["id"]);
+    assert!(page2["next_page_token"].is_null());
+    let r = c.delete(s.url(&loc)).send().await.unwrap();
+    assert_eq!(r.status(), 204);
+    problem(c.get(s.url(&loc)).send().await.unwrap(), 404).await;
+    assert!(!support::data_dir(&s).join("artifacts").join(&id).exists());
+
+    // Metrics and health on the admin listener.
+    let admin = format!("http://{}", s.addrs.admin);
+    let m = c
+        .get(format!("{admin}/metrics"))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert!(m.contains("physnap_jobs_succeeded_total 2"), "{m}");
+    assert_eq!(
+        c.get(format!("{admin}/readyz")).send().await.unwrap().status(),
+        200
+    );
+    s.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn idempotency_key_replays_and_rejects_a_different_body() {
+    let s = start(Opts::default()).await;
+    let c = client();
+    let body = json!({"points": points_json(32), "seed": 1, "resolution": 8});
+    let post = |b: Value| {
+        c.post(s.url("/v1/jobs"))
+            .header("idempotency-key", "k-1")
+            .json(&b)
+            .send()
+    };
+    let a: Value = post(body.clone()).await.unwrap().json().await.unwrap();
+    let r = post(body.clone()).await.unwrap();
+    assert_eq!(r.status(), 202);
+    let b: Value = r.json().await.unwrap();
+    assert_eq!(a["id"], b["id"]);
+    let p = problem(
+        post(json!({"points": points_json(32), "seed": 2})).await.unwrap(),
+        422,
+    )
+    .await;
+    assert_eq!(p["type"], "/problems/idempotency-key-reused");
+    let list: Value = c
+        .get(s.url("/v1/jobs"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(list["jobs"].as_array().unwrap().len(), 1);
+    s.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn queue_full_429_cancel_and_deadline() {
+    let s = start(Opts {
+        max_running_jobs: 1,
+        queue_capacity: 1,
+        ..Default::default()
+    })
+    .await;
+    let c = client();
+    let long = |extra: Value| {
+        let mut b = json!({"points": points_json(32), "samples": 16, "resolution": 8});
+        for (k, v) in extra.as_object().unwrap() {
+            b[k] = v.clone();
+        }
+        b
+    };
+    // A runs, B waits, C finds the queue full.
+    let a: Value = submit(&c, &s.url("/v1/jobs"), long(json!({})))
+        .await
+        .json()
+        .await
+        .unwrap();
+    let a_url = s.url(&format!("/v1/jobs/{}", a["id"].as_str().unwrap()));
+    wait_state(&c, &a_url, &["RUNNING"]).await;
+    let b: Value = submit(&c, &s.url("/v1/jobs"), long(json!({})))
+        .await
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(b["state"], "QUEUED");
+    let r = submit(&c, &s.url("/v1/jobs"), long(json!({}))).await;
+    assert_eq!(r.headers()["retry-after"], "7");
+    let p = problem(r, 429).await;
+    assert_eq!(p["type"], "/problems/queue-full");
+    assert!(p["detail"].as_str().unwrap().contains("limit 1"), "{p}");
+
+    // Cancel the queued job: CANCELLED at once.
+    let b_url = s.url(&format!("/v1/jobs/{}", b["id"].as_str().unwrap()));
+    let r: Value = c
+        .post(format!("{b_url}/cancel"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(r["state"], "CANCELLED");
+
+    // Cancel the running job mid-run: it stops at the next step.
+    let mut sse = SseReader::new(c.get(format!("{a_url}/events")).send().await.unwrap());
+    let mut last_step = 0;
+    while let Some(e) = sse.next().await {
+        if e.event == "progress" {
+            last_step = e.json()["step"].as_u64().unwrap();
+            break;
+        }
+    }
+    assert!(last_step > 0);
+    let t0 = Instant::now();
+    let r: Value = c
+        .post(format!("{a_url}/cancel"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(r["cancel_requested"], true);
+    let mut done = None;
+    while let Some(e) = sse.next().await {
+        if e.event == "done" {
+            done = Some(e.json());
+        }
+    }
+    let latency = t0.elapsed();
+    let done = done.expect("done event");
+    assert_eq!(done["state"], "CANCELLED", "{done:#}");
+    assert_eq!(done["error"]["type"], "cancelled");
+    assert!(
+        done["error"]["detail"].as_str().unwrap().contains("at step"),
+        "{done:#}"
+    );
+    assert!(latency < Duration::from_secs(5), "cancel took {latency:?}");
+    // Cancelling again is idempotent; a finished job cannot be cancelled into another state.
+    let r: Value = c
+        .post(format!("{a_url}/cancel"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(r["state"], "CANCELLED");
+
+    // Deadline: a job that cannot finish in 0.3 s fails with a clear reason.
+    let d: Value = submit(
+        &c,
+        &s.url("/v1/jobs"),
+        long(json!({"deadline_seconds": 0.3})),
+    )
+    .await
+    .json()
+    .await
+    .unwrap();
+    let d = wait_state(
+        &c,
+        &s.url(&format!("/v1/jobs/{}", d["id"].as_str().unwrap())),
+        &["FAILED", "SUCCEEDED", "CANCELLED"],
+    )
+    .await;
+    assert_eq!(d["state"], "FAILED", "{d:#}");
+    assert_eq!(d["error"]["type"], "deadline-exceeded");
+    let detail = d["error"]["detail"].as_str().unwrap();
+    assert!(detail.contains("deadline of 0.3 s exceeded"), "{detail}");
+    // A finished job's artefacts are not there; cancelling it is a conflict.
+    let p = problem(
+        c.get(s.url(&format!("/v1/jobs/{}/artifacts/model.glb", d["id"].as_str().unwrap())))
+            .send()
+            .await
+            .unwrap(),
+        409,
+    )
+    .await;
+    assert_eq!(p["type"], "/problems/job-not-finished");
+    let p = problem(
+        c.post(s.url(&format!("/v1/jobs/{}/cancel", d["id"].as_str().unwrap())))
+            .send()
+            .await
+            .unwrap(),
+        409,
+    )
+    .await;
+    assert_eq!(p["type"], "/problems/job-already-finished");
+    s.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_inputs_get_problems_and_nothing_is_stored() {
+    let s = start(Opts {
+        max_body_bytes: 2 << 20,
+        ..Default::default()
+    })
+    .await;
+    let c = client();
+    let b64 = |b: &[u8]| base64::engine::general_purpose::STANDARD.encode(b);
+    let mut nan = cloud(20);
+    nan[3][1] = f32::NAN;
+    let cases: Vec<(Value, u16, &str, &str)> = vec![
+        (
+            json!({"points_f32le_base64": b64(&f32le(&nan))}),
+            422,
+            "points[3][1]",
+            "NaN",
+        ),
+        (json!({"points": []}), 422, "points", "0 points"),
+        (
+            json!({"points_f32le_base64": b64(&f32le(&cloud(100_001)))}),
+            422,
+            "points",
+            "100001 points",
+        ),
+        (json!({"points": points_json(10)}), 422, "points", "10 points"),
+        (
+            json!({"points": points_json(20), "category": "Spaceship"}),
+            422,
+            "category",
+            "\"Spaceship\"",
+        ),
+        (
+            json!({"points": points_json(20), "w_pen": -0.5}),
+            422,
+            "w_pen",
+            "-0.5",
+        ),
+        (
+            json!({"points": points_json(20), "samples": 99}),
+            422,
+            "samples",
+            "99",
+        ),
+        (json!({"category": "Laptop"}), 422, "points", "missing"),
+    ];
+    for (body, status, field, value) in cases {
+        let p = problem(submit(&c, &s.url("/v1/jobs"), body.clone()).await, status).await;
+        assert_eq!(p["type"], "/problems/validation");
+        let e = &p["errors"][0];
+        assert_eq!(e["field"], field, "{p:#}");
+        assert!(e["value"].as_str().unwrap().contains(value), "{p:#}");
+        assert!(!e["limit"].as_str().unwrap().is_empty());
+        assert!(p["detail"].as_str().unwrap().contains(field), "{p:#}");
+    }
+    // Malformed JSON, an unknown field, a malformed PLY upload, a wrong content type.
+    let p = problem(
+        c.post(s.url("/v1/jobs"))
+            .header("content-type", "application/json")
+            .body("{\"points\": [[1,2,")
+            .send()
+            .await
+            .unwrap(),
+        400,
+    )
+    .await;
+    assert_eq!(p["type"], "/problems/malformed-request");
+    let p = problem(
+        submit(&c, &s.url("/v1/jobs"), json!({"points": points_json(20), "wpc": 1})).await,
+        400,
+    )
+    .await;
+    assert!(p["detail"].as_str().unwrap().contains("wpc"), "{p}");
+    let p = problem(
+        c.post(s.url("/v1/jobs?seed=3"))
+            .header("content-type", "application/x-ply")
+            .body("ply\nformat ascii 1.0\nelement vertex 20\nproperty float x\nend_header\n1 2 3\n")
+            .send()
+            .await
+            .unwrap(),
+        422,
+    )
+    .await;
+    assert_eq!(p["errors"][0]["field"], "points");
+    assert!(p["detail"].as_str().unwrap().contains("PLY"), "{p}");
+    problem(
+        c.post(s.url("/v1/jobs"))
+            .header("content-type", "text/plain")
+            .body("hello")
+            .send()
+            .await
+            .unwrap(),
+        415,
+    )
+    .await;
+    // Oversize body: 413 problem+json from the app.
+    let p = problem(
+        c.post(s.url("/v1/jobs"))
+            .header("content-type", "application/octet-stream")
+            .body(vec![0u8; 3 << 20])
+            .send()
+            .await
+            .unwrap(),
+        413,
+    )
+    .await;
+    assert!(p["detail"].as_str().unwrap().contains("2097152"), "{p}");
+    // Nothing was stored.
+    let list: Value = c
+        .get(s.url("/v1/jobs"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert!(list["jobs"].as_array().unwrap().is_empty(), "{list}");
+    assert_eq!(s.svc.counts().await.unwrap(), vec![]);
+    // A valid raw PLY upload is accepted (the reader path).
+    let ply = physnap::pointcloud::PointCloud {
+        points: cloud(40),
+    }
+    .to_bytes(physnap::pointcloud::Format::Ply);
+    let r = c
+        .post(s.url("/v1/jobs?seed=3&resolution=8&category=Door"))
+        .header("content-type", "application/x-ply")
+        .body(ply)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    let j: Value = r.json().await.unwrap();
+    assert_eq!(j["request"]["point_count"], 40);
+    assert_eq!(j["request"]["category"], "Door");
+    s.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn tenants_see_only_their_jobs() {
+    let s = start(Opts {
+        tokens: "alice:alice-token-1,bob:bob-token-22".into(),
+        ..Default::default()
+    })
+    .await;
+    let c = client();
+    let r = c
+        .post(s.url("/v1/jobs"))
+        .bearer_auth("alice-token-1")
+        .json(&json!({"points": points_json(20), "resolution": 8}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    let id = r.json::<Value>().await.unwrap()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let url = s.url(&format!("/v1/jobs/{id}"));
+    assert_eq!(
+        c.get(&url)
+            .bearer_auth("alice-token-1")
+            .send()
+            .await
+            .unwrap()
+            .status(),
+        200
+    );
+    for path in ["", "/events", "/artifacts/model.glb"] {
+        problem(
+            c.get(format!("{url}{path}"))
+                .bearer_auth("bob-token-22")
+                .send()
+                .await
+                .unwrap(),
+            404,
+        )
+        .await;
+    }
+    problem(
+        c.post(format!("{url}/cancel"))
+            .bearer_auth("bob-token-22")
+            .send()
+            .await
+            .unwrap(),
+        404,
+    )
+    .await;
+    let bobs: Value = c
+        .get(s.url("/v1/jobs"))
+        .bearer_auth("bob-token-22")
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert!(bobs["jobs"].as_array().unwrap().is_empty());
+    let r = c.get(&url).send().await.unwrap();
+    assert_eq!(r.headers()["www-authenticate"], "Bearer");
+    problem(r, 401).await;
+    problem(
+        c.get(&url).bearer_auth("nope-nope-nope").send().await.unwrap(),
+        401,
+    )
+    .await;
+    s.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn drain_refuses_new_jobs_with_503() {
+    let s = start(Opts::default()).await;
+    let c = client();
+    let svc = s.svc.clone();
+    let drain = tokio::spawn(async move { svc.shutdown(Duration::from_secs(5)).await });
+    tokio::time::sleep(Duration::from_millis(50)).await;
+    let r = submit(&c, &s.url("/v1/jobs"), json!({"points": points_json(20)})).await;
+    assert_eq!(r.headers()["retry-after"], "7");
+    let p = problem(r, 503).await;
+    assert_eq!(p["type"], "/problems/shutting-down");
+    assert_eq!(
+        c.get(format!("http://{}/readyz", s.addrs.admin))
+            .send()
+            .await
+            .unwrap()
+            .status(),
+        503
+    );
+    drain.await.unwrap();
+    s.shutdown().await;
+}

@@ -1,0 +1,163 @@
+//! Durability: `kill -9` of a `physnap serve` child while a job runs, then a restart on the
+//! same data dir. The job must be re-run and finish exactly once, with the same artefact bytes
+//! as an uninterrupted run of the same request (fixed seed).
+
+mod support;
+
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use serde_json::{Value, json};
+use support::{SseReader, cloud, tiny_weights};
+
+struct Child9 {
+    child: Child,
+    http: String,
+}
+
+impl Drop for Child9 {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn spawn(root: &Path) -> Child9 {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_physnap"))
+        .args(["serve", "--http", "127.0.0.1:0", "--grpc", "127.0.0.1:0"])
+        .args(["--admin", "127.0.0.1:0", "--worker-threads", "1"])
+        .arg("--data-dir")
+        .arg(root.join("data"))
+        .arg("--weights")
+        .arg(root.join("weights"))
+        .env("PHYSNAP_LOG", "warn")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("spawn physnap serve");
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    // "physnap serve: http=127.0.0.1:P grpc=... admin=..."
+    let http = line
+        .split_whitespace()
+        .find_map(|w| w.strip_prefix("http="))
+        .unwrap_or_else(|| panic!("no address line: {line:?}"))
+        .to_string();
+    Child9 { child, http }
+}
+
+async fn get(c: &reqwest::Client, url: &str) -> Value {
+    c.get(url).send().await.unwrap().json().await.unwrap()
+}
+
+async fn wait_done(c: &reqwest::Client, url: &str) -> Value {
+    let t0 = Instant::now();
+    loop {
+        let j = get(c, url).await;
+        if ["SUCCEEDED", "FAILED", "CANCELLED"].contains(&j["state"].as_str().unwrap()) {
+            return j;
+        }
+        assert!(t0.elapsed() < Duration::from_secs(120), "stuck: {j:#}");
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+fn glb_sha(j: &Value) -> String {
+    j["artifacts"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|a| a["name"] == "model.glb")
+        .unwrap()["sha256"]
+        .as_str()
+        .unwrap()
+        .to_string()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn kill_9_mid_run_then_restart_finishes_once_with_same_bytes() {
+    let root = tempfile::tempdir().unwrap();
+    tiny_weights(&root.path().join("weights"));
+    let c = reqwest::Client::new();
+    let body = json!({"points": cloud(30), "seed": 11, "samples": 6, "resolution": 8,
+                      "category": "Door"});
+
+    let server = spawn(root.path());
+    let r = c
+        .post(format!("http://{}/v1/jobs", server.http))
+        .json(&body)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    let id = r.json::<Value>().await.unwrap()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    // Wait until it is well into the run, then SIGKILL.
+    let mut sse = SseReader::new(
+        c.get(format!("http://{}/v1/jobs/{id}/events", server.http))
+            .send()
+            .await
+            .unwrap(),
+    );
+    loop {
+        let e = sse.next().await.expect("stream ended before progress");
+        if e.event == "progress" && e.json()["step"].as_u64().unwrap() >= 100 {
+            break;
+        }
+        assert_ne!(e.event, "done", "the job finished before it could be killed");
+    }
+    drop(sse);
+    drop(server); // kill -9 + wait
+
+    let server = spawn(root.path());
+    let url = format!("http://{}/v1/jobs/{id}", server.http);
+    let job = wait_done(&c, &url).await;
+    assert_eq!(job["state"], "SUCCEEDED", "{job:#}");
+    assert_eq!(job["attempt"], 2, "{job:#}");
+    let events = SseReader::new(c.get(format!("{url}/events")).send().await.unwrap())
+        .collect()
+        .await;
+    let states: Vec<String> = events
+        .iter()
+        .filter(|e| e.event == "state")
+        .map(|e| e.json()["state"].as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(
+        states,
+        ["QUEUED", "RUNNING", "QUEUED", "RUNNING", "SUCCEEDED"],
+        "{states:?}"
+    );
+    assert_eq!(events.iter().filter(|e| e.event == "done").count(), 1);
+    assert_eq!(events.iter().filter(|e| e.event == "artifact").count(), 3);
+
+    // An uninterrupted run of the same request gives the same bytes.
+    let r = c
+        .post(format!("http://{}/v1/jobs", server.http))
+        .json(&body)
+        .send()
+        .await
+        .unwrap();
+    let id2 = r.json::<Value>().await.unwrap()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let job2 = wait_done(&c, &format!("http://{}/v1/jobs/{id2}", server.http)).await;
+    assert_eq!(job2["attempt"], 1);
+    assert_eq!(glb_sha(&job), glb_sha(&job2));
+    let bytes = c
+        .get(format!("{url}/artifacts/model.glb"))
+        .send()
+        .await
+        .unwrap()
+        .bytes()
+        .await
+        .unwrap();
+    use sha2::Digest as _;
+    assert_eq!(format!("{:x}", sha2::Sha256::digest(&bytes)), glb_sha(&job));
+}

@@ -55,7 +55,12 @@ pub struct ServeArgs {
     #[arg(long, env = "PHYSNAP_RETRY_AFTER", default_value_t = 30)]
     retry_after: u64,
     /// Bearer tokens, `tenant:token,...`. None (and no file): no authentication, loopback only.
-    #[arg(long, env = "PHYSNAP_TOKENS", default_value = "", hide_env_values = true)]
+    #[arg(
+        long,
+        env = "PHYSNAP_TOKENS",
+        default_value = "",
+        hide_env_values = true
+    )]
     tokens: String,
     /// File of `tenant token` lines.
     #[arg(long, env = "PHYSNAP_TOKENS_FILE")]
@@ -65,7 +70,10 @@ pub struct ServeArgs {
 pub fn serve(a: ServeArgs) -> anyhow::Result<()> {
     let tenants = Tenants::load(&a.tokens, a.tokens_file.as_deref()).map_err(anyhow::Error::msg)?;
     if !(a.drain_timeout.is_finite() && a.drain_timeout >= 0.0) {
-        anyhow::bail!("invalid --drain-timeout: {} (must be >= 0)", a.drain_timeout);
+        anyhow::bail!(
+            "invalid --drain-timeout: {} (must be >= 0)",
+            a.drain_timeout
+        );
     }
     if a.max_running_jobs == 0 || a.queue_capacity == 0 {
         anyhow::bail!("invalid --max-running-jobs / --queue-capacity: must be at least 1");

@@ -150,7 +150,11 @@ async fn submit_watch_get_artifact() {
         .await
         .unwrap_err();
     assert_eq!(e.code(), tonic::Code::InvalidArgument);
-    assert!(e.message().contains("w_mob") && e.message().contains("-1"), "{}", e.message());
+    assert!(
+        e.message().contains("w_mob") && e.message().contains("-1"),
+        "{}",
+        e.message()
+    );
     let mut cat = spec(flat.clone());
     cat.category = "Spaceship".into();
     let e = cl
@@ -185,9 +189,12 @@ async fn submit_watch_get_artifact() {
     assert_eq!(e.code(), tonic::Code::NotFound);
 
     // Standard health service.
-    let mut health = tonic_health::pb::health_client::HealthClient::connect(s.grpc_url())
+    let channel = tonic::transport::Endpoint::from_shared(s.grpc_url())
+        .unwrap()
+        .connect()
         .await
         .unwrap();
+    let mut health = tonic_health::pb::health_client::HealthClient::new(channel);
     let h = health
         .check(tonic_health::pb::HealthCheckRequest {
             service: "physnap.v1.JobService".into(),

@@ -164,7 +164,11 @@ async fn submit_stream_download_validate_resume() {
             .filter(|e| e.event != "progress")
             .map(|e| e.seq())
             .collect();
-        assert_eq!(replay, ((after + 1)..=last).collect::<Vec<_>>(), "after {after}");
+        assert_eq!(
+            replay,
+            ((after + 1)..=last).collect::<Vec<_>>(),
+            "after {after}"
+        );
     }
     // Already saw the terminal event: 204 stops EventSource reconnecting.
     let r = c
@@ -237,7 +241,11 @@ async fn submit_stream_download_validate_resume() {
         .unwrap();
     assert!(m.contains("physnap_jobs_succeeded_total 2"), "{m}");
     assert_eq!(
-        c.get(format!("{admin}/readyz")).send().await.unwrap().status(),
+        c.get(format!("{admin}/readyz"))
+            .send()
+            .await
+            .unwrap()
+            .status(),
         200
     );
     s.shutdown().await;
@@ -260,7 +268,9 @@ async fn idempotency_key_replays_and_rejects_a_different_body() {
     let b: Value = r.json().await.unwrap();
     assert_eq!(a["id"], b["id"]);
     let p = problem(
-        post(json!({"points": points_json(32), "seed": 2})).await.unwrap(),
+        post(json!({"points": points_json(32), "seed": 2}))
+            .await
+            .unwrap(),
         422,
     )
     .await;
@@ -356,7 +366,10 @@ async fn queue_full_429_cancel_and_deadline() {
     assert_eq!(done["state"], "CANCELLED", "{done:#}");
     assert_eq!(done["error"]["type"], "cancelled");
     assert!(
-        done["error"]["detail"].as_str().unwrap().contains("at step"),
+        done["error"]["detail"]
+            .as_str()
+            .unwrap()
+            .contains("at step"),
         "{done:#}"
     );
     assert!(latency < Duration::from_secs(5), "cancel took {latency:?}");
@@ -393,10 +406,13 @@ async fn queue_full_429_cancel_and_deadline() {
     assert!(detail.contains("deadline of 0.3 s exceeded"), "{detail}");
     // A finished job's artefacts are not there; cancelling it is a conflict.
     let p = problem(
-        c.get(s.url(&format!("/v1/jobs/{}/artifacts/model.glb", d["id"].as_str().unwrap())))
-            .send()
-            .await
-            .unwrap(),
+        c.get(s.url(&format!(
+            "/v1/jobs/{}/artifacts/model.glb",
+            d["id"].as_str().unwrap()
+        )))
+        .send()
+        .await
+        .unwrap(),
         409,
     )
     .await;
@@ -438,7 +454,12 @@ async fn bad_inputs_get_problems_and_nothing_is_stored() {
             "points",
             "100001 points",
         ),
-        (json!({"points": points_json(10)}), 422, "points", "10 points"),
+        (
+            json!({"points": points_json(10)}),
+            422,
+            "points",
+            "10 points",
+        ),
         (
             json!({"points": points_json(20), "category": "Spaceship"}),
             422,
@@ -481,7 +502,12 @@ async fn bad_inputs_get_problems_and_nothing_is_stored() {
     .await;
     assert_eq!(p["type"], "/problems/malformed-request");
     let p = problem(
-        submit(&c, &s.url("/v1/jobs"), json!({"points": points_json(20), "wpc": 1})).await,
+        submit(
+            &c,
+            &s.url("/v1/jobs"),
+            json!({"points": points_json(20), "wpc": 1}),
+        )
+        .await,
         400,
     )
     .await;
@@ -532,10 +558,8 @@ async fn bad_inputs_get_problems_and_nothing_is_stored() {
     assert!(list["jobs"].as_array().unwrap().is_empty(), "{list}");
     assert_eq!(s.svc.counts().await.unwrap(), vec![]);
     // A valid raw PLY upload is accepted (the reader path).
-    let ply = physnap::pointcloud::PointCloud {
-        points: cloud(40),
-    }
-    .to_bytes(physnap::pointcloud::Format::Ply);
+    let ply = physnap::pointcloud::PointCloud { points: cloud(40) }
+        .to_bytes(physnap::pointcloud::Format::Ply);
     let r = c
         .post(s.url("/v1/jobs?seed=3&resolution=8&category=Door"))
         .header("content-type", "application/x-ply")
@@ -614,7 +638,11 @@ async fn tenants_see_only_their_jobs() {
     assert_eq!(r.headers()["www-authenticate"], "Bearer");
     problem(r, 401).await;
     problem(
-        c.get(&url).bearer_auth("nope-nope-nope").send().await.unwrap(),
+        c.get(&url)
+            .bearer_auth("nope-nope-nope")
+            .send()
+            .await
+            .unwrap(),
         401,
     )
     .await;

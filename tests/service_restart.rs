@@ -110,7 +110,10 @@ async fn kill_9_mid_run_then_restart_finishes_once_with_same_bytes() {
         if e.event == "progress" && e.json()["step"].as_u64().unwrap() >= 100 {
             break;
         }
-        assert_ne!(e.event, "done", "the job finished before it could be killed");
+        assert_ne!(
+            e.event, "done",
+            "the job finished before it could be killed"
+        );
     }
     drop(sse);
     drop(server); // kill -9 + wait

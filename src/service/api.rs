@@ -489,6 +489,10 @@ pub fn job_view(r: &JobRecord, progress: Option<&Progress>, cancel_requested: bo
             error_type: f.error_type.clone(),
             detail: f.detail.clone(),
         }),
-        artifacts: r.artifacts.iter().map(|a| artifact_view(&r.id, a)).collect(),
+        artifacts: r
+            .artifacts
+            .iter()
+            .map(|a| artifact_view(&r.id, a))
+            .collect(),
     }
 }

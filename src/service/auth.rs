@@ -93,7 +93,10 @@ impl Tenants {
             return Ok(ANONYMOUS_TENANT.to_string());
         }
         let token = authorization
-            .and_then(|h| h.strip_prefix("Bearer ").or_else(|| h.strip_prefix("bearer ")))
+            .and_then(|h| {
+                h.strip_prefix("Bearer ")
+                    .or_else(|| h.strip_prefix("bearer "))
+            })
             .map(str::trim)
             .ok_or_else(|| {
                 ServiceError::Unauthenticated("missing `authorization: Bearer <token>`".into())

@@ -80,7 +80,8 @@ pub fn status_of(e: ServiceError) -> Status {
                 }
             }
         }
-        ServiceError::QueueFull { retry_after, .. } | ServiceError::ShuttingDown { retry_after } => {
+        ServiceError::QueueFull { retry_after, .. }
+        | ServiceError::ShuttingDown { retry_after } => {
             if let Ok(m) = MetadataValue::try_from(retry_after.to_string()) {
                 md.insert("retry-after", m);
             }
@@ -113,7 +114,11 @@ fn job_msg(j: &JobView) -> pb::Job {
             .as_ref()
             .map(|e| e.error_type.clone())
             .unwrap_or_default(),
-        error_detail: j.error.as_ref().map(|e| e.detail.clone()).unwrap_or_default(),
+        error_detail: j
+            .error
+            .as_ref()
+            .map(|e| e.detail.clone())
+            .unwrap_or_default(),
     }
 }
 
@@ -196,7 +201,11 @@ impl JobService for GrpcJobs {
     ) -> Result<Response<pb::ListJobsResponse>, Status> {
         let tenant = self.tenant(&req)?;
         let r = req.into_inner();
-        let size = if r.page_size == 0 { 50 } else { r.page_size as usize };
+        let size = if r.page_size == 0 {
+            50
+        } else {
+            r.page_size as usize
+        };
         let page = self
             .svc
             .list(&tenant, size, Some(r.page_token.as_str()))
@@ -295,7 +304,11 @@ impl JobService for GrpcJobs {
                 Ok(pb::ArtifactChunk {
                     data: bytes[lo..hi].to_vec(),
                     offset: lo as u64,
-                    sha256: if i + 1 == n { a.sha256.clone() } else { String::new() },
+                    sha256: if i + 1 == n {
+                        a.sha256.clone()
+                    } else {
+                        String::new()
+                    },
                 })
             })
             .collect();

@@ -27,8 +27,8 @@ use tokio_stream::wrappers::ReceiverStream;
 use utoipa::OpenApi;
 
 use super::api::{
-    ARTIFACT_NAMES, ArtifactView, FieldError, JobList, JobRequest, JobView, Problem,
-    UploadParams, media_type,
+    ARTIFACT_NAMES, ArtifactView, FieldError, JobList, JobRequest, JobView, Problem, UploadParams,
+    media_type,
 };
 use super::auth::Tenants;
 use super::jobs::{Service, ServiceError, WatchItem};
@@ -477,7 +477,10 @@ async fn list_artifacts(
     if job.state != "SUCCEEDED" {
         return Err(err(ServiceError::Conflict {
             kind: "job-not-finished",
-            detail: format!("job {id} is {}; artefacts exist once it SUCCEEDED", job.state),
+            detail: format!(
+                "job {id} is {}; artefacts exist once it SUCCEEDED",
+                job.state
+            ),
         }));
     }
     Ok(Json(job.artifacts))
@@ -506,7 +509,9 @@ async fn get_artifact(
     let err = at(&uri);
     let tenant = tenant(&st, &headers).map_err(&err)?;
     if !ARTIFACT_NAMES.contains(&name.as_str()) {
-        return Err(err(ServiceError::NotFound(format!("{id}/artifacts/{name}"))));
+        return Err(err(ServiceError::NotFound(format!(
+            "{id}/artifacts/{name}"
+        ))));
     }
     let (path, a) = st.svc.artifact(&tenant, &id, &name).await.map_err(&err)?;
     let etag = format!("\"{}\"", a.sha256);
@@ -628,12 +633,36 @@ async fn metrics(State(svc): State<Arc<Service>>) -> Response {
     let mut counter = |name: &str, help: &str, v: u64| {
         let _ = writeln!(s, "# HELP {name} {help}\n# TYPE {name} counter\n{name} {v}");
     };
-    counter("physnap_jobs_submitted_total", "Jobs admitted.", m.submitted.load(Ordering::Relaxed));
-    counter("physnap_jobs_succeeded_total", "Jobs that succeeded.", m.succeeded.load(Ordering::Relaxed));
-    counter("physnap_jobs_failed_total", "Jobs that failed.", m.failed.load(Ordering::Relaxed));
-    counter("physnap_jobs_cancelled_total", "Jobs cancelled.", m.cancelled.load(Ordering::Relaxed));
-    counter("physnap_jobs_recovered_total", "Jobs re-queued at start-up.", m.recovered.load(Ordering::Relaxed));
-    counter("physnap_diffusion_steps_total", "Diffusion steps run.", m.steps.load(Ordering::Relaxed));
+    counter(
+        "physnap_jobs_submitted_total",
+        "Jobs admitted.",
+        m.submitted.load(Ordering::Relaxed),
+    );
+    counter(
+        "physnap_jobs_succeeded_total",
+        "Jobs that succeeded.",
+        m.succeeded.load(Ordering::Relaxed),
+    );
+    counter(
+        "physnap_jobs_failed_total",
+        "Jobs that failed.",
+        m.failed.load(Ordering::Relaxed),
+    );
+    counter(
+        "physnap_jobs_cancelled_total",
+        "Jobs cancelled.",
+        m.cancelled.load(Ordering::Relaxed),
+    );
+    counter(
+        "physnap_jobs_recovered_total",
+        "Jobs re-queued at start-up.",
+        m.recovered.load(Ordering::Relaxed),
+    );
+    counter(
+        "physnap_diffusion_steps_total",
+        "Diffusion steps run.",
+        m.steps.load(Ordering::Relaxed),
+    );
     let _ = writeln!(
         s,
         "# HELP physnap_jobs_rejected_total Submissions refused.\n# TYPE physnap_jobs_rejected_total counter\n\
@@ -656,9 +685,5 @@ async fn metrics(State(svc): State<Arc<Service>>) -> Response {
         svc.queued(),
         svc.running()
     );
-    (
-        [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
-        s,
-    )
-        .into_response()
+    ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], s).into_response()
 }

@@ -399,19 +399,24 @@ impl Service {
         idempotency: Option<(String, String)>,
     ) -> Result<(JobView, bool), ServiceError> {
         if self.is_draining() {
-            self.metrics.rejected_draining.fetch_add(1, Ordering::Relaxed);
+            self.metrics
+                .rejected_draining
+                .fetch_add(1, Ordering::Relaxed);
             return Err(ServiceError::ShuttingDown {
                 retry_after: self.cfg.retry_after_seconds,
             });
         }
         let svc = self.clone();
         let tenant = tenant.to_string();
-        let res = tokio::task::spawn_blocking(move || svc.submit_blocking(&tenant, input, idempotency))
-            .await
-            .map_err(|e| ServiceError::Internal(e.to_string()))?;
+        let res =
+            tokio::task::spawn_blocking(move || svc.submit_blocking(&tenant, input, idempotency))
+                .await
+                .map_err(|e| ServiceError::Internal(e.to_string()))?;
         match &res {
             Err(ServiceError::Invalid(_)) => {
-                self.metrics.rejected_invalid.fetch_add(1, Ordering::Relaxed);
+                self.metrics
+                    .rejected_invalid
+                    .fetch_add(1, Ordering::Relaxed);
             }
             Err(ServiceError::QueueFull { .. }) => {
                 self.metrics.rejected_full.fetch_add(1, Ordering::Relaxed);
@@ -738,7 +743,11 @@ impl Service {
         }
     }
 
-    async fn run(self: Arc<Self>, id: &str, _permit: OwnedSemaphorePermit) -> Result<(), ServiceError> {
+    async fn run(
+        self: Arc<Self>,
+        id: &str,
+        _permit: OwnedSemaphorePermit,
+    ) -> Result<(), ServiceError> {
         let key = id.to_string();
         let Some(mut rec) = self.db(move |s| s.get(&key)).await? else {
             return Ok(());
@@ -813,7 +822,12 @@ impl Service {
         self.running.fetch_sub(1, Ordering::Relaxed);
         let progress = tx.borrow().progress.clone();
         let at = progress
-            .map(|p| format!("at step {} of {} (sample {})", p.step, p.total_steps, p.sample))
+            .map(|p| {
+                format!(
+                    "at step {} of {} (sample {})",
+                    p.step, p.total_steps, p.sample
+                )
+            })
             .unwrap_or_else(|| "before the first step".into());
         rec.ended_ms = Some(now_ms());
         match out {
@@ -834,7 +848,8 @@ impl Service {
             Ok(Ok(Ok(output))) => {
                 let dir = self.artifact_dir(id);
                 let artifacts = tokio::task::spawn_blocking(move || {
-                    std::fs::create_dir_all(&dir).map_err(|e| ServiceError::Internal(e.to_string()))?;
+                    std::fs::create_dir_all(&dir)
+                        .map_err(|e| ServiceError::Internal(e.to_string()))?;
                     let arts = output
                         .files
                         .iter()
@@ -939,7 +954,10 @@ impl Service {
             tokio::time::sleep(Duration::from_millis(50)).await;
         }
         if self.running() > 0 {
-            tracing::warn!(running = self.running(), "drain timeout: stopping running jobs; they re-run on restart");
+            tracing::warn!(
+                running = self.running(),
+                "drain timeout: stopping running jobs; they re-run on restart"
+            );
             self.hard_stop.store(true, Ordering::Relaxed);
             let t1 = std::time::Instant::now();
             while self.running() > 0 && t1.elapsed() < Duration::from_secs(10) {
@@ -957,6 +975,11 @@ fn encode_token(id: &str) -> String {
 
 fn decode_token(t: &str) -> Option<String> {
     use base64::Engine as _;
-    let b = base64::engine::general_purpose::URL_SAFE_NO_PAD.decode(t).ok()?;
-    String::from_utf8(b).ok()?.strip_prefix("after:").map(str::to_string)
+    let b = base64::engine::general_purpose::URL_SAFE_NO_PAD
+        .decode(t)
+        .ok()?;
+    String::from_utf8(b)
+        .ok()?
+        .strip_prefix("after:")
+        .map(str::to_string)
 }

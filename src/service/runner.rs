@@ -183,6 +183,9 @@ pub fn run_job(
 ) -> Result<JobOutput, RunError> {
     let m = &models.loaded;
     let scales = &m.manifest.feature_scales;
+    // `..Default::default()` on purpose: the guidance work adds fields to GenerateRequest, and
+    // this literal must keep compiling (and pick their defaults) until it sets them here.
+    #[allow(clippy::needless_update)]
     let req = GenerateRequest {
         seed: spec.seed,
         samples: spec.samples as usize,
@@ -243,14 +246,13 @@ pub fn run_job(
         return Err(RunError::Stopped(reason));
     }
     // Best-of-N: without guidance losses there is nothing to rank by; take sample 0.
-    let chosen = results
-        .into_iter()
-        .next()
-        .ok_or_else(|| RunError::Engine(EngineError::Invalid {
+    let chosen = results.into_iter().next().ok_or_else(|| {
+        RunError::Engine(EngineError::Invalid {
             field: "samples".into(),
             limit: "at least 1".into(),
             value: "0".into(),
-        }))?;
+        })
+    })?;
     let n = models.schedule.len() as u32;
     progress(&Progress {
         phase: Phase::Exporting,

@@ -81,9 +81,7 @@ fn io(what: &str, addr: SocketAddr) -> impl Fn(std::io::Error) -> ServiceError +
 impl Server {
     /// Check the config, load weights, open the store (re-queueing interrupted jobs) and bind.
     pub async fn bind(cfg: ServeConfig) -> Result<Server, ServiceError> {
-        if cfg.tenants.is_open()
-            && !(cfg.http.ip().is_loopback() && cfg.grpc.ip().is_loopback())
-        {
+        if cfg.tenants.is_open() && !(cfg.http.ip().is_loopback() && cfg.grpc.ip().is_loopback()) {
             return Err(ServiceError::Internal(format!(
                 "no tokens configured (--tokens / --tokens-file), so no authentication: allowed only \
                  when the HTTP and gRPC listeners are on loopback, not on {} / {}",
@@ -121,8 +119,12 @@ impl Server {
             },
         )?;
         let listeners = [
-            TcpListener::bind(cfg.http).await.map_err(io("HTTP", cfg.http))?,
-            TcpListener::bind(cfg.grpc).await.map_err(io("gRPC", cfg.grpc))?,
+            TcpListener::bind(cfg.http)
+                .await
+                .map_err(io("HTTP", cfg.http))?,
+            TcpListener::bind(cfg.grpc)
+                .await
+                .map_err(io("gRPC", cfg.grpc))?,
             TcpListener::bind(cfg.admin)
                 .await
                 .map_err(io("admin", cfg.admin))?,
@@ -150,7 +152,10 @@ impl Server {
     }
 
     /// Serve until `shutdown` resolves, then drain and return.
-    pub async fn run(self, shutdown: impl Future<Output = ()> + Send + 'static) -> Result<(), ServiceError> {
+    pub async fn run(
+        self,
+        shutdown: impl Future<Output = ()> + Send + 'static,
+    ) -> Result<(), ServiceError> {
         let Server {
             cfg,
             svc,
@@ -204,11 +209,7 @@ impl Server {
             .add_service(reflection)
             .add_service(jobs)
             .serve_with_incoming_shutdown(TcpListenerStream::new(grpc_l), wait());
-        let (h, a, g) = tokio::join!(
-            async { http.await },
-            async { admin.await },
-            grpc
-        );
+        let (h, a, g) = tokio::join!(async { http.await }, async { admin.await }, grpc);
         h.map_err(|e| ServiceError::Internal(format!("HTTP server: {e}")))?;
         a.map_err(|e| ServiceError::Internal(format!("admin server: {e}")))?;
         g.map_err(|e| ServiceError::Internal(format!("gRPC server: {e}")))?;

@@ -155,7 +155,11 @@ pub struct Violation {
     pub value: String,
 }
 
-fn violation(field: impl Into<String>, limit: impl Into<String>, value: impl ToString) -> Violation {
+fn violation(
+    field: impl Into<String>,
+    limit: impl Into<String>,
+    value: impl ToString,
+) -> Violation {
     Violation {
         field: field.into(),
         limit: limit.into(),
@@ -170,7 +174,9 @@ fn cloud_violation(e: PointCloudError, limits: &Limits) -> Violation {
             violation(format!("points[{index}][{axis}]"), "finite", value)
         }
         PointCloudError::Empty => violation("points", range, "0 points"),
-        PointCloudError::TooFew { count, .. } => violation("points", range, format!("{count} points")),
+        PointCloudError::TooFew { count, .. } => {
+            violation("points", range, format!("{count} points"))
+        }
         PointCloudError::TooMany { count, .. } => {
             violation("points", range, format!("{count} points"))
         }
@@ -196,63 +202,68 @@ pub fn parse_points(p: &PointsInput, limits: &Limits) -> Result<Vec<[f32; 3]>, V
         min_points: limits.min_points,
         max_points: limits.max_points,
     };
-    let cloud = match p {
-        PointsInput::Triples(t) => {
-            // f64 → f32: values beyond f32 range become infinite and are rejected below.
-            let cloud = PointCloud {
-                points: t.iter().map(|q| q.map(|c| c as f32)).collect(),
-            };
-            cloud.validate(&cl).map_err(|e| cloud_violation(e, limits))?;
-            cloud
-        }
-        PointsInput::Flat(v) => {
-            if v.len() % 3 != 0 {
-                return Err(violation(
-                    "points",
-                    "a multiple of 3 values (x, y, z per point)",
-                    format!("{} values", v.len()),
-                ));
+    let cloud =
+        match p {
+            PointsInput::Triples(t) => {
+                // f64 → f32: values beyond f32 range become infinite and are rejected below.
+                let cloud = PointCloud {
+                    points: t.iter().map(|q| q.map(|c| c as f32)).collect(),
+                };
+                cloud
+                    .validate(&cl)
+                    .map_err(|e| cloud_violation(e, limits))?;
+                cloud
             }
-            let cloud = PointCloud {
-                points: v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
-            };
-            cloud.validate(&cl).map_err(|e| cloud_violation(e, limits))?;
-            cloud
-        }
-        PointsInput::F32Le(b) => {
-            if b.len() % 12 != 0 {
-                return Err(violation(
-                    "points",
-                    "a multiple of 12 bytes (3 little-endian f32 per point)",
-                    format!("{} bytes", b.len()),
-                ));
+            PointsInput::Flat(v) => {
+                if !v.len().is_multiple_of(3) {
+                    return Err(violation(
+                        "points",
+                        "a multiple of 3 values (x, y, z per point)",
+                        format!("{} values", v.len()),
+                    ));
+                }
+                let cloud = PointCloud {
+                    points: v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+                };
+                cloud
+                    .validate(&cl)
+                    .map_err(|e| cloud_violation(e, limits))?;
+                cloud
             }
-            if b.len() / 12 > limits.max_points {
-                return Err(cloud_violation(
-                    PointCloudError::TooMany {
-                        count: (b.len() / 12) as u64,
-                        max: limits.max_points,
-                    },
-                    limits,
-                ));
+            PointsInput::F32Le(b) => {
+                if !b.len().is_multiple_of(12) {
+                    return Err(violation(
+                        "points",
+                        "a multiple of 12 bytes (3 little-endian f32 per point)",
+                        format!("{} bytes", b.len()),
+                    ));
+                }
+                if b.len() / 12 > limits.max_points {
+                    return Err(cloud_violation(
+                        PointCloudError::TooMany {
+                            count: (b.len() / 12) as u64,
+                            max: limits.max_points,
+                        },
+                        limits,
+                    ));
+                }
+                let f = |c: &[u8]| f32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+                let cloud = PointCloud {
+                    points: b
+                        .chunks_exact(12)
+                        .map(|c| [f(&c[0..4]), f(&c[4..8]), f(&c[8..12])])
+                        .collect(),
+                };
+                cloud
+                    .validate(&cl)
+                    .map_err(|e| cloud_violation(e, limits))?;
+                cloud
             }
-            let f = |c: &[u8]| f32::from_le_bytes([c[0], c[1], c[2], c[3]]);
-            let cloud = PointCloud {
-                points: b
-                    .chunks_exact(12)
-                    .map(|c| [f(&c[0..4]), f(&c[4..8]), f(&c[8..12])])
-                    .collect(),
-            };
-            cloud.validate(&cl).map_err(|e| cloud_violation(e, limits))?;
-            cloud
-        }
-        PointsInput::Ply(b) => {
-            PointCloud::from_bytes(b, Format::Ply, &cl).map_err(|e| cloud_violation(e, limits))?
-        }
-        PointsInput::Npy(b) => {
-            PointCloud::from_bytes(b, Format::Npy, &cl).map_err(|e| cloud_violation(e, limits))?
-        }
-    };
+            PointsInput::Ply(b) => PointCloud::from_bytes(b, Format::Ply, &cl)
+                .map_err(|e| cloud_violation(e, limits))?,
+            PointsInput::Npy(b) => PointCloud::from_bytes(b, Format::Npy, &cl)
+                .map_err(|e| cloud_violation(e, limits))?,
+        };
     Ok(cloud.points)
 }
 
@@ -417,7 +428,10 @@ mod tests {
             validate(&i, &caps(), &l, 0).unwrap_err()
         };
         let v = bad(&|i| i.points = Some(cloud(15)));
-        assert_eq!((v.field.as_str(), v.value.as_str()), ("points", "15 points"));
+        assert_eq!(
+            (v.field.as_str(), v.value.as_str()),
+            ("points", "15 points")
+        );
         assert!(v.limit.contains("16..=100000"));
         let v = bad(&|i| i.w_pen = Some(-1.0));
         assert_eq!((v.field.as_str(), v.value.as_str()), ("w_pen", "-1"));

@@ -201,7 +201,7 @@ fn spec_from_row(id: &str, json: &str, blob: &[u8]) -> Result<JobSpec, StoreErro
         detail,
     };
     let d: SpecDoc = serde_json::from_str(json).map_err(|e| corrupt(e.to_string()))?;
-    if blob.len() % 12 != 0 {
+    if !blob.len().is_multiple_of(12) {
         return Err(corrupt(format!("points blob of {} bytes", blob.len())));
     }
     let f = |c: &[u8]| f32::from_le_bytes([c[0], c[1], c[2], c[3]]);

@@ -439,8 +439,13 @@ mod tests {
         let v = bad(&|i| i.category = Some("Spaceship".into()));
         assert_eq!(v.field, "category");
         assert!(v.limit.contains("Door, Window"), "{v}");
-        let v = bad(&|i| i.points = Some(PointsInput::Flat(vec![0.0, f32::NAN, 0.0])));
-        assert_eq!(v.field, "points[0][1]");
+        let mut flat = vec![0.5f32; 60];
+        flat[4] = f32::NAN;
+        let v = bad(&|i| i.points = Some(PointsInput::Flat(flat.clone())));
+        assert_eq!(
+            (v.field.as_str(), v.limit.as_str()),
+            ("points[1][1]", "finite")
+        );
         let v = bad(&|i| i.samples = Some(0));
         assert_eq!(v.field, "samples");
         let v = bad(&|i| i.steps = Some(50));

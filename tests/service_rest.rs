@@ -671,3 +671,58 @@ async fn drain_refuses_new_jobs_with_503() {
     drain.await.unwrap();
     s.shutdown().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sse_resume_mid_run_loses_no_state_event() {
+    let s = start(Opts::default()).await;
+    let c = client();
+    let j: Value = submit(
+        &c,
+        &s.url("/v1/jobs"),
+        json!({"points": points_json(32), "samples": 8, "resolution": 8, "seed": 3}),
+    )
+    .await
+    .json()
+    .await
+    .unwrap();
+    let ev_url = s.url(&format!("/v1/jobs/{}/events", j["id"].as_str().unwrap()));
+    // First connection: read until the job is running and has made progress, then hang up.
+    let mut seen = Vec::new();
+    let mut sse = SseReader::new(c.get(&ev_url).send().await.unwrap());
+    let mut last_id = 0;
+    while let Some(e) = sse.next().await {
+        last_id = e.seq();
+        if e.event != "progress" {
+            seen.push(e.seq());
+        } else if e.json()["step"].as_u64().unwrap() > 50 {
+            break;
+        }
+        assert_ne!(e.event, "done", "finished before the disconnect");
+    }
+    drop(sse);
+    assert!(
+        seen.contains(&2),
+        "RUNNING not seen before disconnect: {seen:?}"
+    );
+    // The job keeps running without a client; reconnect with Last-Event-ID.
+    let r = c
+        .get(&ev_url)
+        .header("last-event-id", last_id.to_string())
+        .send()
+        .await
+        .unwrap();
+    let rest = SseReader::new(r).collect().await;
+    assert!(
+        rest.iter().any(|e| e.event == "progress"),
+        "a resumed stream gets progress"
+    );
+    seen.extend(
+        rest.iter()
+            .filter(|e| e.event != "progress")
+            .map(|e| e.seq()),
+    );
+    assert_eq!(seen, (1..=seen.len() as u64).collect::<Vec<_>>());
+    assert_eq!(rest.last().unwrap().event, "done");
+    assert_eq!(rest.last().unwrap().json()["state"], "SUCCEEDED");
+    s.shutdown().await;
+}

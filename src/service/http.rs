@@ -122,7 +122,7 @@ impl From<ServiceError> for ApiError {
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         let p = problem_of(&self.0, self.1);
-        if p.status >= 500 {
+        if p.status >= 500 && p.status != 503 {
             tracing::error!(error = %self.0, "request failed");
         }
         let mut r = (

@@ -206,7 +206,41 @@ async fn submit_watch_get_artifact() {
         h.status,
         tonic_health::pb::health_check_response::ServingStatus::Serving as i32
     );
+
+    // Reflection v1 lists the job service (grpcurl-style discovery).
+    use tonic_reflection::pb::v1 as refl;
+    let mut rc = refl::server_reflection_client::ServerReflectionClient::new(channel_for(&s).await);
+    let req = refl::ServerReflectionRequest {
+        host: String::new(),
+        message_request: Some(
+            refl::server_reflection_request::MessageRequest::ListServices(String::new()),
+        ),
+    };
+    let mut resp = rc
+        .server_reflection_info(tokio_stream::iter(vec![req]))
+        .await
+        .unwrap()
+        .into_inner();
+    let first = resp.next().await.unwrap().unwrap();
+    let Some(refl::server_reflection_response::MessageResponse::ListServicesResponse(list)) =
+        first.message_response
+    else {
+        panic!("unexpected reflection answer: {first:?}");
+    };
+    let names: Vec<String> = list.service.into_iter().map(|s| s.name).collect();
+    assert!(
+        names.contains(&"physnap.v1.JobService".to_string()),
+        "{names:?}"
+    );
     s.shutdown().await;
+}
+
+async fn channel_for(s: &support::TestServer) -> tonic::transport::Channel {
+    tonic::transport::Endpoint::from_shared(s.grpc_url())
+        .unwrap()
+        .connect()
+        .await
+        .unwrap()
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -144,7 +144,7 @@ pub fn input_of(spec: pb::JobSpec) -> JobInput {
         samples: spec.samples,
         deadline_seconds: spec.deadline_seconds,
         preview_every: spec.preview_every,
-        resolution: None,
+        resolution: spec.resolution,
     }
 }
 

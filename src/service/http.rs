@@ -32,7 +32,7 @@ use super::api::{
 };
 use super::auth::Tenants;
 use super::jobs::{Service, ServiceError, WatchItem};
-use super::spec::PointsInput;
+use super::spec::{JobInput, PointsInput};
 
 /// Shared state of the REST handlers.
 #[derive(Clone)]
@@ -208,32 +208,13 @@ async fn submit(
         .unwrap_or("")
         .trim()
         .to_ascii_lowercase();
-    let upload = |points: PointsInput| -> Result<_, ServiceError> {
-        let q = query.clone().unwrap_or_default();
-        let params: UploadParams = serde_urlencoded_parse(&q)?;
-        Ok(params.into_input(points))
-    };
-    let input = match ctype.as_str() {
-        "application/json" => {
-            let de = &mut serde_json::Deserializer::from_slice(&body);
-            let req: JobRequest = serde_path_to_error::deserialize(de)
-                .map_err(|e| err(ServiceError::Malformed(e.to_string())))?;
-            req.into_input().map_err(|v| err(v.into()))?
-        }
-        "application/x-ply" | "application/ply" | "model/x-ply" => {
-            upload(PointsInput::Ply(body.to_vec())).map_err(&err)?
-        }
-        "application/x-npy" | "application/npy" => {
-            upload(PointsInput::Npy(body.to_vec())).map_err(&err)?
-        }
-        "application/octet-stream" => upload(PointsInput::F32Le(body.to_vec())).map_err(&err)?,
-        other => {
-            return Err(err(ServiceError::UnsupportedMediaType {
-                got: other.to_string(),
-                expected: "application/json, application/x-ply, application/x-npy or application/octet-stream",
-            }));
-        }
-    };
+    // Parsing a large body (100k points of JSON is ~3 MB) is CPU work: keep it off the tokio
+    // workers.
+    let (ct, q, b) = (ctype.clone(), query.clone(), body.clone());
+    let input = tokio::task::spawn_blocking(move || parse_body(&ct, q.as_deref(), &b))
+        .await
+        .map_err(|e| err(ServiceError::Internal(e.to_string())))?
+        .map_err(&err)?;
     let idem = match headers.get("idempotency-key") {
         None => None,
         Some(v) => {
@@ -265,6 +246,32 @@ async fn submit(
         Json(job),
     )
         .into_response())
+}
+
+/// A submission body (JSON request, or a raw PLY / NPY / f32le upload with the knobs in the
+/// query string) as the domain input.
+fn parse_body(ctype: &str, query: Option<&str>, body: &[u8]) -> Result<JobInput, ServiceError> {
+    let upload = |points: PointsInput| -> Result<JobInput, ServiceError> {
+        let params: UploadParams = serde_urlencoded_parse(query.unwrap_or(""))?;
+        Ok(params.into_input(points))
+    };
+    match ctype {
+        "application/json" => {
+            let de = &mut serde_json::Deserializer::from_slice(body);
+            let req: JobRequest = serde_path_to_error::deserialize(de)
+                .map_err(|e| ServiceError::Malformed(e.to_string()))?;
+            Ok(req.into_input()?)
+        }
+        "application/x-ply" | "application/ply" | "model/x-ply" => {
+            upload(PointsInput::Ply(body.to_vec()))
+        }
+        "application/x-npy" | "application/npy" => upload(PointsInput::Npy(body.to_vec())),
+        "application/octet-stream" => upload(PointsInput::F32Le(body.to_vec())),
+        other => Err(ServiceError::UnsupportedMediaType {
+            got: other.to_string(),
+            expected: "application/json, application/x-ply, application/x-npy or application/octet-stream",
+        }),
+    }
 }
 
 fn serde_urlencoded_parse(q: &str) -> Result<UploadParams, ServiceError> {

@@ -13,6 +13,7 @@ use clap::{Args, Parser, Subcommand};
 use physnap::export::{ExportOptions, export_dir, mesh_parts};
 use physnap::mesh::MeshingOptions;
 
+mod client_cmd;
 mod data_cmd;
 mod model_cmd;
 mod serve_cmd;
@@ -56,6 +57,10 @@ enum Command {
     Serve(serve_cmd::ServeArgs),
     /// Exit 0 when a running server's admin /readyz answers 200 (container health checks).
     Healthcheck(serve_cmd::HealthcheckArgs),
+    /// Submit a point cloud to a running server (gRPC); with --out, watch it and download.
+    Submit(client_cmd::SubmitArgs),
+    /// Follow a job on a running server (progress bar); with --out, download its artefacts.
+    Watch(client_cmd::WatchArgs),
 }
 
 #[derive(Subcommand, Debug)]
@@ -329,6 +334,8 @@ fn run(command: Command) -> anyhow::Result<()> {
         Command::Generate(a) => model_cmd::generate(a),
         Command::Serve(a) => serve_cmd::serve(a),
         Command::Healthcheck(a) => serve_cmd::healthcheck(a),
+        Command::Submit(a) => client_cmd::submit(a),
+        Command::Watch(a) => client_cmd::watch(a),
         Command::Data { command } => match command {
             DataCommand::Synth(a) => data_cmd::synth(a),
             DataCommand::Import(a) => data_cmd::import(a),

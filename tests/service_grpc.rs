@@ -279,3 +279,60 @@ async fn queue_full_is_resource_exhausted() {
     }
     s.shutdown().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn cli_submit_watch_downloads_verified_artifacts() {
+    let s = start(Opts::default()).await;
+    let ply = s.root.path().join("scan.ply");
+    physnap::pointcloud::PointCloud { points: cloud(40) }
+        .write(&ply, physnap::pointcloud::Format::Ply)
+        .unwrap();
+    let out = s.root.path().join("out");
+    let (server, ply2, out2) = (s.grpc_url(), ply.clone(), out.clone());
+    let o = tokio::task::spawn_blocking(move || {
+        std::process::Command::new(env!("CARGO_BIN_EXE_physnap"))
+            .args(["submit", "--server", &server, "--category", "Door"])
+            .args(["--seed", "4", "--resolution", "8", "--points"])
+            .arg(&ply2)
+            .arg("--out")
+            .arg(&out2)
+            .env("PHYSNAP_LOG", "warn")
+            .output()
+            .unwrap()
+    })
+    .await
+    .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let id = stdout.lines().next().unwrap().trim().to_string();
+    let job = s.svc.get("local", &id).await.unwrap();
+    assert_eq!(job.state, "SUCCEEDED");
+    assert_eq!(job.request.category.as_deref(), Some("Door"));
+    for a in &job.artifacts {
+        let bytes = std::fs::read(out.join(&a.name)).unwrap();
+        assert_eq!(
+            format!("{:x}", Sha256::digest(&bytes)),
+            a.sha256,
+            "{}",
+            a.name
+        );
+    }
+    // `watch` of a finished job prints its state; an unknown id fails with NOT_FOUND.
+    let server = s.grpc_url();
+    let o = tokio::task::spawn_blocking(move || {
+        std::process::Command::new(env!("CARGO_BIN_EXE_physnap"))
+            .args(["watch", "--server", &server, "no-such-job"])
+            .env("PHYSNAP_LOG", "warn")
+            .output()
+            .unwrap()
+    })
+    .await
+    .unwrap();
+    assert!(!o.status.success());
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("NotFound"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    s.shutdown().await;
+}

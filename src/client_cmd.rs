@@ -1,0 +1,224 @@
+//! CLI wiring of `physnap submit` and `physnap watch`: a small gRPC client of a running server
+//! (binary only).
+//!
+//! Why it exists: scripts want "send this point cloud, show progress, give me the files"
+//! without writing a client. It uses the generated tonic client of `proto/physnap/v1`, reads the
+//! cloud with the same readers as the server (PLY, NPY, JSON; the server re-validates), shows a
+//! progress bar from `WatchJob`, and downloads the artefacts with `GetArtifact`, checking their
+//! sha256.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use clap::Args;
+use sha2::{Digest, Sha256};
+use tokio_stream::StreamExt as _;
+use tonic::Request;
+
+use physnap::pointcloud::{Limits, PointCloud};
+use physnap::service::grpc::pb::{self, job_service_client::JobServiceClient};
+
+#[derive(Args, Debug)]
+pub struct ConnArgs {
+    /// gRPC address of the server.
+    #[arg(long, env = "PHYSNAP_SERVER", default_value = "http://127.0.0.1:50051")]
+    server: String,
+    /// Bearer token (when the server has tenants).
+    #[arg(long, env = "PHYSNAP_TOKEN", hide_env_values = true)]
+    token: Option<String>,
+}
+
+#[derive(Args, Debug)]
+pub struct SubmitArgs {
+    #[command(flatten)]
+    conn: ConnArgs,
+    /// Partial point cloud (.ply, .npy or .json).
+    #[arg(long, env = "PHYSNAP_POINTS")]
+    points: PathBuf,
+    /// Category (e.g. StorageFurniture); omit for unconditional generation.
+    #[arg(long, env = "PHYSNAP_CATEGORY")]
+    category: Option<String>,
+    /// Seed of sample 0 (default: the server picks one and reports it).
+    #[arg(long, env = "PHYSNAP_SEED")]
+    seed: Option<u64>,
+    /// Best-of-N samples.
+    #[arg(long, env = "PHYSNAP_SAMPLES")]
+    samples: Option<u32>,
+    /// Marching-cubes resolution.
+    #[arg(long, env = "PHYSNAP_MC_RESOLUTION")]
+    resolution: Option<u32>,
+    /// Job deadline in seconds.
+    #[arg(long, env = "PHYSNAP_DEADLINE")]
+    deadline: Option<f64>,
+    /// Idempotency key (a retry with the same key returns the same job).
+    #[arg(long, env = "PHYSNAP_REQUEST_ID", default_value = "")]
+    request_id: String,
+    /// Watch the job to the end and download its artefacts into this directory.
+    #[arg(long, env = "PHYSNAP_OUT")]
+    out: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+pub struct WatchArgs {
+    #[command(flatten)]
+    conn: ConnArgs,
+    /// Job id.
+    id: String,
+    /// Download the artefacts into this directory once the job succeeded.
+    #[arg(long, env = "PHYSNAP_OUT")]
+    out: Option<PathBuf>,
+}
+
+type Client = JobServiceClient<tonic::transport::Channel>;
+
+fn request<T>(conn: &ConnArgs, msg: T) -> anyhow::Result<Request<T>> {
+    let mut r = Request::new(msg);
+    if let Some(t) = &conn.token {
+        r.metadata_mut().insert(
+            "authorization",
+            format!("Bearer {t}")
+                .parse()
+                .context("the token is not valid header text")?,
+        );
+    }
+    Ok(r)
+}
+
+fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    Ok(tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?)
+}
+
+async fn connect(conn: &ConnArgs) -> anyhow::Result<Client> {
+    JobServiceClient::connect(conn.server.clone())
+        .await
+        .with_context(|| format!("connecting to {}", conn.server))
+}
+
+fn status(e: tonic::Status) -> anyhow::Error {
+    anyhow::anyhow!("{:?}: {}", e.code(), e.message())
+}
+
+pub fn submit(a: SubmitArgs) -> anyhow::Result<()> {
+    let cloud = PointCloud::read(&a.points, &Limits::default())
+        .with_context(|| format!("reading {}", a.points.display()))?;
+    let xyz: Vec<u8> = cloud
+        .points
+        .iter()
+        .flat_map(|p| p.iter().flat_map(|c| c.to_le_bytes()))
+        .collect();
+    runtime()?.block_on(async {
+        let mut cl = connect(&a.conn).await?;
+        let spec = pb::JobSpec {
+            points: Some(pb::job_spec::Points::XyzF32le(xyz)),
+            category: a.category.clone().unwrap_or_default(),
+            seed: a.seed,
+            samples: a.samples,
+            resolution: a.resolution,
+            deadline_seconds: a.deadline,
+            ..Default::default()
+        };
+        let job = cl
+            .submit_job(request(
+                &a.conn,
+                pb::SubmitJobRequest {
+                    spec: Some(spec),
+                    request_id: a.request_id.clone(),
+                },
+            )?)
+            .await
+            .map_err(status)?
+            .into_inner();
+        println!("{}", job.id);
+        match &a.out {
+            Some(out) => watch_and_fetch(&mut cl, &a.conn, &job.id, Some(out)).await,
+            None => Ok(()),
+        }
+    })
+}
+
+pub fn watch(a: WatchArgs) -> anyhow::Result<()> {
+    runtime()?.block_on(async {
+        let mut cl = connect(&a.conn).await?;
+        watch_and_fetch(&mut cl, &a.conn, &a.id, a.out.as_deref()).await
+    })
+}
+
+async fn watch_and_fetch(
+    cl: &mut Client,
+    conn: &ConnArgs,
+    id: &str,
+    out: Option<&Path>,
+) -> anyhow::Result<()> {
+    let mut stream = cl
+        .watch_job(request(
+            conn,
+            pb::WatchJobRequest {
+                id: id.to_string(),
+                after_sequence: 0,
+            },
+        )?)
+        .await
+        .map_err(status)?
+        .into_inner();
+    let pb_ = super::progress_bar(1000, "job");
+    let mut last: Option<pb::JobEvent> = None;
+    while let Some(ev) = stream.next().await {
+        let ev = ev.map_err(status)?;
+        if ev.kind == "progress" {
+            let p: serde_json::Value = serde_json::from_str(&ev.json).unwrap_or_default();
+            let (step, total) = (p["step"].as_u64().unwrap_or(0), p["total_steps"].as_u64());
+            let (sample, samples) = (p["sample"].as_u64().unwrap_or(0), p["samples"].as_u64());
+            if let (Some(total), Some(samples)) = (total, samples) {
+                pb_.set_length(total * samples);
+                pb_.set_position(sample * total + step);
+            }
+            pb_.set_prefix(p["phase"].as_str().unwrap_or("").to_string());
+        }
+        last = Some(ev);
+    }
+    pb_.finish_and_clear();
+    let last = last.context("the event stream ended without events")?;
+    let job: serde_json::Value = serde_json::from_str(&last.json).unwrap_or_default();
+    let state = job["state"].as_str().unwrap_or("?");
+    eprintln!("job {id}: {state}");
+    if state != "SUCCEEDED" {
+        bail!(
+            "job {id} {state}: {} ({})",
+            job["error"]["detail"].as_str().unwrap_or(""),
+            job["error"]["type"].as_str().unwrap_or("")
+        );
+    }
+    let Some(out) = out else { return Ok(()) };
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    for name in physnap::service::api::ARTIFACT_NAMES {
+        let mut chunks = cl
+            .get_artifact(request(
+                conn,
+                pb::GetArtifactRequest {
+                    id: id.to_string(),
+                    name: name.to_string(),
+                },
+            )?)
+            .await
+            .map_err(status)?
+            .into_inner();
+        let (mut bytes, mut sha) = (Vec::new(), String::new());
+        while let Some(c) = chunks.next().await {
+            let c = c.map_err(status)?;
+            bytes.extend_from_slice(&c.data);
+            if !c.sha256.is_empty() {
+                sha = c.sha256;
+            }
+        }
+        let got = format!("{:x}", Sha256::digest(&bytes));
+        if got != sha {
+            bail!("{name}: sha256 {got} does not match the server's {sha}");
+        }
+        let path = out.join(name);
+        physnap::export::write_atomic(&path, &bytes)?;
+        println!("{}", path.display());
+    }
+    Ok(())
+}

@@ -119,6 +119,7 @@ pub fn serve(a: ServeArgs) -> anyhow::Result<()> {
         .thread_name("physnap-io")
         .build()?;
     rt.block_on(async move {
+        let shutdown = shutdown_signal()?;
         let server = Server::bind(cfg).await?;
         let addrs = server.addrs();
         // One machine-readable line on stdout, so scripts (and tests) using port 0 can find us.
@@ -128,27 +129,33 @@ pub fn serve(a: ServeArgs) -> anyhow::Result<()> {
         );
         std::io::stdout().flush().ok();
         tracing::info!(http = %addrs.http, grpc = %addrs.grpc, admin = %addrs.admin, "listening");
-        server.run(shutdown_signal()).await?;
+        server.run(shutdown).await?;
         Ok::<_, anyhow::Error>(())
     })
 }
 
-async fn shutdown_signal() {
-    let ctrl_c = async {
-        let _ = tokio::signal::ctrl_c().await;
-    };
+/// Resolves on SIGINT or SIGTERM. The handlers are installed when this is *called* (not when
+/// the future is first polled), so a signal that arrives right after the address line is
+/// printed is never lost.
+fn shutdown_signal() -> anyhow::Result<impl std::future::Future<Output = ()> + Send + 'static> {
     #[cfg(unix)]
-    let term = async {
-        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
-            Ok(mut s) => {
-                s.recv().await;
+    {
+        use tokio::signal::unix::{SignalKind, signal};
+        let mut term = signal(SignalKind::terminate())?;
+        let mut int = signal(SignalKind::interrupt())?;
+        Ok(async move {
+            tokio::select! {
+                _ = term.recv() => {}
+                _ = int.recv() => {}
             }
-            Err(_) => std::future::pending::<()>().await,
-        }
-    };
+        })
+    }
     #[cfg(not(unix))]
-    let term = std::future::pending::<()>();
-    tokio::select! { _ = ctrl_c => {}, _ = term => {} }
+    {
+        Ok(async {
+            let _ = tokio::signal::ctrl_c().await;
+        })
+    }
 }
 
 #[derive(Args, Debug)]

@@ -164,3 +164,70 @@ async fn kill_9_mid_run_then_restart_finishes_once_with_same_bytes() {
     use sha2::Digest as _;
     assert_eq!(format!("{:x}", sha2::Sha256::digest(&bytes)), glb_sha(&job));
 }
+
+#[test]
+fn serve_logs_its_config_with_tokens_redacted() {
+    let root = tempfile::tempdir().unwrap();
+    tiny_weights(&root.path().join("weights"));
+    let mut child = Command::new(env!("CARGO_BIN_EXE_physnap"))
+        .args(["serve", "--http", "127.0.0.1:0", "--grpc", "127.0.0.1:0"])
+        .args(["--admin", "127.0.0.1:0", "--worker-threads", "1"])
+        .arg("--data-dir")
+        .arg(root.path().join("data"))
+        .arg("--weights")
+        .arg(root.path().join("weights"))
+        .env("PHYSNAP_LOG", "info")
+        .env("PHYSNAP_TOKENS", "lab:very-secret-token-42")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    assert!(line.starts_with("physnap serve: http="), "{line:?}");
+    // SIGTERM: graceful drain, then a clean exit.
+    let pid = child.id().to_string();
+    assert!(
+        Command::new("kill")
+            .args(["-TERM", &pid])
+            .status()
+            .unwrap()
+            .success()
+    );
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success(), "exit status {:?}", out.status);
+    let log = String::from_utf8_lossy(&out.stderr);
+    assert!(log.contains("effective config"), "{log}");
+    assert!(log.contains("lab"), "tenant names are logged: {log}");
+    assert!(log.contains("[redacted]"), "{log}");
+    assert!(!log.contains("very-secret-token-42"), "token leaked: {log}");
+    assert!(log.contains("stopped"), "{log}");
+}
+
+#[test]
+fn no_auth_is_refused_off_loopback() {
+    let root = tempfile::tempdir().unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_physnap"))
+        .args(["serve", "--http", "0.0.0.0:0", "--grpc", "127.0.0.1:0"])
+        .args(["--admin", "127.0.0.1:0"])
+        .arg("--data-dir")
+        .arg(root.path().join("data"))
+        .arg("--weights")
+        .arg(root.path().join("weights"))
+        .env("PHYSNAP_LOG", "warn")
+        .env_remove("PHYSNAP_TOKENS")
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        e.contains("no tokens configured") && e.contains("0.0.0.0"),
+        "{e}"
+    );
+    assert!(
+        !root.path().join("data").exists(),
+        "nothing is created when refusing"
+    );
+}

@@ -315,6 +315,23 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
         "seconds": { "sampling": sampling_s, "id": id_s, "total": wall },
         "command": std::env::args().collect::<Vec<_>>().join(" "),
     });
+    if a.write_manifest {
+        // Record the figures in the weights' manifest (the weights files and their sha256 are
+        // untouched): metrics.generative = this report, metrics.shape_val_iou from training.
+        let path = a.weights.join("manifest.json");
+        let mut m: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path)?)
+            .with_context(|| format!("parsing {}", path.display()))?;
+        let iou = m["training"]["shape"]["val_iou"].clone();
+        if !m["metrics"].is_object() {
+            m["metrics"] = json!({});
+        }
+        m["metrics"]["generative"] = report.clone();
+        m["metrics"]["shape_val_iou"] = iou;
+        let tmp = path.with_extension("json.tmp");
+        std::fs::write(&tmp, serde_json::to_string_pretty(&m)? + "\n")?;
+        std::fs::rename(&tmp, &path)?;
+        println!("  metrics recorded in {}", path.display());
+    }
     if let Some(out) = &a.out {
         std::fs::write(out, serde_json::to_string_pretty(&report)? + "\n")
             .with_context(|| format!("writing {}", out.display()))?;

@@ -101,6 +101,9 @@ struct EvalGenerativeArgs {
     /// Also write the report as JSON here.
     #[arg(long, env = "PHYSNAP_EVAL_OUT")]
     out: Option<PathBuf>,
+    /// Record the report under `metrics` in the weights' manifest.json.
+    #[arg(long, env = "PHYSNAP_EVAL_WRITE_MANIFEST")]
+    write_manifest: bool,
 }
 
 #[derive(Subcommand, Debug)]

@@ -15,6 +15,7 @@ use physnap::mesh::MeshingOptions;
 
 mod client_cmd;
 mod data_cmd;
+mod eval_cmd;
 mod model_cmd;
 mod serve_cmd;
 
@@ -53,6 +54,11 @@ enum Command {
         #[command(subcommand)]
         command: DataCommand,
     },
+    /// Evaluate trained weights with the paper's metrics.
+    Eval {
+        #[command(subcommand)]
+        command: EvalCommand,
+    },
     /// Run the inference service: REST + SSE, gRPC, admin (metrics, health); see README.
     Serve(serve_cmd::ServeArgs),
     /// Exit 0 when a running server's admin /readyz answers 200 (container health checks).
@@ -61,6 +67,53 @@ enum Command {
     Submit(client_cmd::SubmitArgs),
     /// Follow a job on a running server (progress bar); with --out, download its artefacts.
     Watch(client_cmd::WatchArgs),
+}
+
+#[derive(Subcommand, Debug)]
+enum EvalCommand {
+    /// Sample the prior and compare with the test split: validity, MMD / COV / 1-NNA by
+    /// instantiation distance, category accuracy of conditioned samples.
+    Generative(EvalGenerativeArgs),
+}
+
+#[derive(Args, Debug)]
+struct EvalGenerativeArgs {
+    /// Weights directory with manifest.json.
+    #[arg(long, env = "PHYSNAP_WEIGHTS", default_value = "weights")]
+    weights: PathBuf,
+    /// Imported data set whose test split is the reference set.
+    #[arg(long, env = "PHYSNAP_DATA")]
+    data: PathBuf,
+    /// Unconditional samples.
+    #[arg(long, env = "PHYSNAP_SAMPLES", default_value_t = 64)]
+    samples: usize,
+    /// Reference (test-split) objects, chosen by the seed.
+    #[arg(long, env = "PHYSNAP_EVAL_REFS", default_value_t = 64)]
+    refs: usize,
+    /// Category-conditioned samples per category present among the references (0: skip).
+    #[arg(long, env = "PHYSNAP_EVAL_PER_CATEGORY", default_value_t = 6)]
+    per_category: usize,
+    /// Joint states per object for the instantiation distance (method.md: 10).
+    #[arg(long, env = "PHYSNAP_EVAL_STATES", default_value_t = 4)]
+    states: usize,
+    /// Surface points per state for the instantiation distance (method.md: 2048).
+    #[arg(long, env = "PHYSNAP_EVAL_POINTS", default_value_t = 512)]
+    points: usize,
+    /// MMD/COV/1-NNA set order: pointflow (PhysNAP, default) or nap (NAP's original code).
+    #[arg(long, env = "PHYSNAP_EVAL_ORDER", default_value = "pointflow")]
+    order: String,
+    /// Marching-cubes grid cells per axis for the samples.
+    #[arg(long, env = "PHYSNAP_MC_RESOLUTION", default_value_t = 32)]
+    resolution: usize,
+    /// Seed (samples, reference choice, state sampling).
+    #[arg(long, env = "PHYSNAP_SEED", default_value_t = 12345)]
+    seed: u64,
+    /// Also write the report as JSON here.
+    #[arg(long, env = "PHYSNAP_EVAL_OUT")]
+    out: Option<PathBuf>,
+    /// Record the report under `metrics` in the weights' manifest.json.
+    #[arg(long, env = "PHYSNAP_EVAL_WRITE_MANIFEST")]
+    write_manifest: bool,
 }
 
 #[derive(Subcommand, Debug)]
@@ -341,6 +394,9 @@ fn run(command: Command) -> anyhow::Result<()> {
             DataCommand::Import(a) => data_cmd::import(a),
             DataCommand::Scan(a) => data_cmd::scan(a),
             DataCommand::Testset(a) => data_cmd::testset(a),
+        },
+        Command::Eval { command } => match command {
+            EvalCommand::Generative(a) => eval_cmd::generative(a),
         },
     }
 }

@@ -1,0 +1,7 @@
+//! Evaluation: the metrics the paper reports, computed on our own generated and reference
+//! objects. [`generative`] holds NAP's distribution metrics (§7 of method.md).
+//!
+//! Why a separate layer: metrics are pure functions of objects, meshes and clouds; they never
+//! touch the network or the transports, so the CLI, tests and benchmarks share them.
+
+pub mod generative;

@@ -7,6 +7,7 @@
 pub mod data;
 pub mod engine;
 pub mod error;
+pub mod eval;
 pub mod export;
 pub mod fixtures;
 pub mod graph;

@@ -167,6 +167,10 @@ struct GenerateArgs {
     /// Temperature τ of the point-to-part soft assignment.
     #[arg(long, env = "PHYSNAP_TAU", default_value_t = physnap::engine::guidance::DEFAULT_TAU)]
     tau: f64,
+    /// Clamp each guidance-gradient entry to ±this (model space); a deviation from the paper's
+    /// raw gradient, off by default.
+    #[arg(long, env = "PHYSNAP_GUIDANCE_MAX_STEP")]
+    guidance_max_step: Option<f64>,
     /// Reverse-step rule: ddpm (NAP; strided ancestral with --steps) or ddim.
     #[arg(long, env = "PHYSNAP_SAMPLER", default_value = "ddpm", value_parser = ["ddpm", "ddim"])]
     sampler: String,

@@ -6,6 +6,7 @@ use std::path::Path;
 use anyhow::{Context, bail};
 
 use physnap::data::categories::category_index;
+use physnap::engine::EngineError;
 use physnap::engine::generate::{GenerateRequest, generate_with as run_generate};
 use physnap::engine::guidance::{GuidanceOptions, SdfField, Terms};
 use physnap::engine::sample::Sampler;
@@ -181,22 +182,53 @@ pub fn generate(a: GenerateArgs) -> anyhow::Result<()> {
     let decoder = LatentSdfDecoder::new(&models.shape_prior.decoder);
     let started = std::time::Instant::now();
     let mut last_losses = None;
-    let results = run_generate(
-        &models.denoiser,
-        &decoder,
-        Some(&decoder as &dyn SdfField),
-        &models.manifest.feature_scales,
-        &schedule,
-        &req,
-        &mut |e| {
-            pb.set_position((e.sample * e.step.total + e.step.step) as u64);
-            if let Some(l) = e.step.guidance {
-                last_losses = Some(l);
+    // One request per sample (sample i uses seed + i either way), so a guided sample that
+    // diverges is reported and the others still count for best-of-N.
+    let mut results = Vec::new();
+    let mut diverged = Vec::new();
+    for i in 0..a.samples {
+        let one = GenerateRequest {
+            seed: a.seed.wrapping_add(i as u64),
+            samples: 1,
+            ..req.clone()
+        };
+        let r = run_generate(
+            &models.denoiser,
+            &decoder,
+            Some(&decoder as &dyn SdfField),
+            &models.manifest.feature_scales,
+            &schedule,
+            &one,
+            &mut |e| {
+                pb.set_position((i * e.step.total + e.step.step) as u64);
+                if let Some(l) = e.step.guidance {
+                    last_losses = Some(l);
+                }
+                ControlFlow::Continue(())
+            },
+        );
+        match r {
+            Ok(mut out) => {
+                let mut g = out.remove(0);
+                g.index = i;
+                g.object.name = format!("sample_{i:03}");
+                results.push(g);
             }
-            ControlFlow::Continue(())
-        },
-    )?;
+            Err(e @ EngineError::Diverged { .. }) => {
+                pb.println(format!("sample_{i:03} (seed {}): {e}", one.seed));
+                diverged.push((format!("sample_{i:03}"), one.seed, e.to_string()));
+            }
+            Err(e) => return Err(e.into()),
+        }
+    }
     pb.finish_and_clear();
+    if results.is_empty() {
+        bail!(
+            "all {} samples diverged (first: {}); lower the guidance weights (--w-pc/--w-pen/--w-mob) or --guidance-steps",
+            a.samples,
+            diverged.first().map(|d| d.2.as_str()).unwrap_or("")
+        );
+    }
     let per_sample = started.elapsed().as_secs_f64() / a.samples as f64;
     let opts = ExportOptions {
         meshing: req.meshing,
@@ -227,7 +259,7 @@ pub fn generate(a: GenerateArgs) -> anyhow::Result<()> {
         );
     }
     if let (Some(opts), Some(points)) = (&guidance, &a.points) {
-        write_ranking(&a.out, points, opts, rows)?;
+        write_ranking(&a.out, points, opts, rows, &diverged)?;
     }
     Ok(())
 }
@@ -266,6 +298,7 @@ fn guidance_options(a: &GenerateArgs) -> anyhow::Result<Option<GuidanceOptions>>
         w_mob: a.w_mob.unwrap_or(paper.w_mob),
         steps: a.guidance_steps,
         tau: a.tau,
+        max_step: a.guidance_max_step,
         ..paper
     };
     opts.validate(Schedule::default().len())?;
@@ -278,6 +311,7 @@ fn write_ranking(
     points: &Path,
     opts: &GuidanceOptions,
     mut rows: Vec<(String, u64, physnap::eval::guided::GuidedMetrics)>,
+    diverged: &[(String, u64, String)],
 ) -> anyhow::Result<()> {
     rows.sort_by(|a, b| {
         let key = |m: &physnap::eval::guided::GuidedMetrics| {
@@ -323,6 +357,9 @@ fn write_ranking(
         },
         "best": best,
         "samples": ranked,
+        "diverged": diverged.iter().map(|(name, seed, error)| serde_json::json!({
+            "sample": name, "seed": seed, "error": error,
+        })).collect::<Vec<_>>(),
     });
     let path = out.join("ranking.json");
     std::fs::write(&path, serde_json::to_string_pretty(&doc)? + "\n")?;

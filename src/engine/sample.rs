@@ -248,7 +248,21 @@ pub fn sample_guided(
                     gmax = if m.is_nan() { f32::NAN } else { gmax.max(m) };
                 }
             }
-            if !(gmax.is_finite() && gmax <= DIVERGENCE_LIMIT) {
+            tracing::debug!(
+                step = k + 1,
+                t,
+                pc = values.pc,
+                pen = values.pen,
+                mob = values.mob,
+                grad_max = gmax,
+                "guided step"
+            );
+            let limit = if g.max_step.is_some() {
+                f32::INFINITY
+            } else {
+                DIVERGENCE_LIMIT
+            };
+            if !(gmax.is_finite() && gmax <= limit) {
                 return Err(EngineError::Diverged {
                     step: k + 1,
                     t,
@@ -290,11 +304,15 @@ pub fn sample_guided(
             e = e + ze * c.sigma;
         }
         if let Some((gv, ge)) = grad {
+            let clip = |g: Tensor<3>| match guided.and_then(|(o, _)| o.max_step) {
+                Some(c) => g.clamp(-c as f32, c as f32),
+                None => g,
+            };
             if let Some(gv) = gv {
-                v = v - gv;
+                v = v - clip(gv);
             }
             if let Some(ge) = ge {
-                e = e - ge;
+                e = e - clip(ge);
             }
         }
         // A cheap divergence check every 50 steps, every guided step and at the end.

@@ -56,8 +56,8 @@ pub fn loss_items(classes: &[[f32; 3]], rng: &mut Rng) -> Vec<SweepItem> {
     let mut out = Vec::new();
     for (edge, &(i, j)) in EDGE_PAIRS.iter().enumerate() {
         let c = classes[edge].map(|v| v.clamp(0.0, 1.0));
-        for class in 1..=2 {
-            if c[class] > EDGE_THRESHOLD {
+        for (class, &ck) in c.iter().enumerate().skip(1) {
+            if ck > EDGE_THRESHOLD {
                 for _ in 0..STATES {
                     let (u_r, u_p) = (rng.uniform() as f32, rng.uniform() as f32);
                     out.push(SweepItem {

@@ -81,6 +81,10 @@ pub struct GuidanceOptions {
     pub steps: usize,
     /// τ of the soft assignment in ℓ_pc.
     pub tau: f64,
+    /// Clamp every entry of ∇_{x_t} ℓ to ±this (model space) before subtracting it. A
+    /// deviation from the paper (which subtracts the raw gradient, §9 A11), off (None) by
+    /// default; with it, the runaway-gradient check only rejects non-finite gradients.
+    pub max_step: Option<f64>,
 }
 
 impl Default for GuidanceOptions {
@@ -106,6 +110,7 @@ impl GuidanceOptions {
             w_mob: on(terms.mob, W_MOB_BASE),
             steps: DEFAULT_GUIDED_STEPS,
             tau: DEFAULT_TAU,
+            max_step: None,
         }
     }
 
@@ -129,6 +134,11 @@ impl GuidanceOptions {
         }
         if !(self.tau.is_finite() && self.tau > 0.0 && self.tau <= 1e9) {
             return bad("tau", "finite, in (0, 1e9]".into(), self.tau.to_string());
+        }
+        if let Some(c) = self.max_step
+            && !(c.is_finite() && c > 0.0)
+        {
+            return bad("max_step", "finite and > 0".into(), c.to_string());
         }
         if self.steps > total_steps {
             return bad(

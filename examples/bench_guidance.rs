@@ -81,8 +81,11 @@ fn main() {
             ),
             ("pc+pen+mob", Some(Terms::ALL)),
         ] {
+            // Every step guided; the clamp keeps a random model's sample from running off (it
+            // changes no cost: the same queries are made).
             let guidance = terms.map(|t| GuidanceOptions {
                 steps: 1000,
+                max_step: Some(0.05),
                 ..GuidanceOptions::paper(cloud(), t)
             });
             let req = SampleRequest {

@@ -213,6 +213,9 @@ struct EvalGuidedArgs {
     /// Temperature τ.
     #[arg(long, env = "PHYSNAP_TAU", default_value_t = physnap::engine::guidance::DEFAULT_TAU)]
     tau: f64,
+    /// Clamp each guidance-gradient entry to ±this (a deviation from the paper; off by default).
+    #[arg(long, env = "PHYSNAP_GUIDANCE_MAX_STEP")]
+    guidance_max_step: Option<f64>,
     /// Reverse-step rule: ddpm or ddim.
     #[arg(long, env = "PHYSNAP_SAMPLER", default_value = "ddpm", value_parser = ["ddpm", "ddim"])]
     sampler: String,

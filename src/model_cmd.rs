@@ -458,6 +458,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         },
         guided_steps: a.guidance_steps,
         tau: a.tau,
+        max_step: a.guidance_max_step,
         sampler: match a.sampler.as_str() {
             "ddim" => Sampler::Ddim { eta: a.eta },
             _ => Sampler::Ddpm,
@@ -497,6 +498,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         "clouds": clouds.iter().map(|c| c.id.clone()).collect::<Vec<_>>(),
         "samples_per_cloud": a.samples_per_cloud,
         "seed": a.seed, "guidance_steps": a.guidance_steps, "tau": a.tau,
+        "guidance_max_step": a.guidance_max_step,
         "sampler": a.sampler, "steps": a.steps, "eta": a.eta,
         "statistic": "median over all samples",
         "rows": rows.iter().map(|r| serde_json::json!({

@@ -237,6 +237,8 @@ pub struct TableOptions {
     pub guided_steps: usize,
     /// τ.
     pub tau: f64,
+    /// Optional clamp of the guidance gradient (a deviation; see `GuidanceOptions::max_step`).
+    pub max_step: Option<f64>,
     /// Reverse-step rule and count.
     pub sampler: Sampler,
     /// Reverse steps (0: all).
@@ -305,6 +307,7 @@ pub fn guided_table(
                 let guidance = variant.terms.map(|t| GuidanceOptions {
                     steps: opts.guided_steps,
                     tau: opts.tau,
+                    max_step: opts.max_step,
                     ..GuidanceOptions::paper(cloud.points.clone(), t)
                 });
                 for k in 0..opts.samples_per_cloud {
@@ -487,6 +490,7 @@ mod tests {
             category_aware: vec![false, true],
             guided_steps: 1000,
             tau: 1000.0,
+            max_step: Some(0.05),
             sampler: Sampler::Ddim { eta: 0.0 },
             steps: 4,
             meshing: MeshingOptions { resolution: 8 },

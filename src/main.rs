@@ -14,6 +14,7 @@ use physnap::export::{ExportOptions, export_dir, mesh_parts};
 use physnap::mesh::MeshingOptions;
 
 mod data_cmd;
+mod eval_cmd;
 mod model_cmd;
 
 // mimalloc instead of glibc malloc: the ML stack allocates and frees many short-lived buffers
@@ -46,16 +47,66 @@ enum Command {
     },
     /// Generate articulated objects with trained weights (GLB + URDF per sample).
     Generate(GenerateArgs),
-    /// Evaluation: PhysNAP's guidance table (Table 1 layout).
-    Eval {
-        #[command(subcommand)]
-        command: EvalCommand,
-    },
     /// Data sets: procedural objects, PartNet-Mobility import, partial scans.
     Data {
         #[command(subcommand)]
         command: DataCommand,
     },
+    /// Evaluate trained weights with the paper's metrics.
+    Eval {
+        #[command(subcommand)]
+        command: EvalCommand,
+    },
+}
+
+#[derive(Subcommand, Debug)]
+enum EvalCommand {
+    /// Sample the prior and compare with the test split: validity, MMD / COV / 1-NNA by
+    /// instantiation distance, category accuracy of conditioned samples.
+    Generative(EvalGenerativeArgs),
+    /// Guidance metrics (E_pc, D_pc, E_pen, E_mob medians) per variant on test scans, in the
+    /// paper's Table 1 layout; writes guided_table.md and guided_table.json.
+    Guided(EvalGuidedArgs),
+}
+
+#[derive(Args, Debug)]
+struct EvalGenerativeArgs {
+    /// Weights directory with manifest.json.
+    #[arg(long, env = "PHYSNAP_WEIGHTS", default_value = "weights")]
+    weights: PathBuf,
+    /// Imported data set whose test split is the reference set.
+    #[arg(long, env = "PHYSNAP_DATA")]
+    data: PathBuf,
+    /// Unconditional samples.
+    #[arg(long, env = "PHYSNAP_SAMPLES", default_value_t = 64)]
+    samples: usize,
+    /// Reference (test-split) objects, chosen by the seed.
+    #[arg(long, env = "PHYSNAP_EVAL_REFS", default_value_t = 64)]
+    refs: usize,
+    /// Category-conditioned samples per category present among the references (0: skip).
+    #[arg(long, env = "PHYSNAP_EVAL_PER_CATEGORY", default_value_t = 6)]
+    per_category: usize,
+    /// Joint states per object for the instantiation distance (method.md: 10).
+    #[arg(long, env = "PHYSNAP_EVAL_STATES", default_value_t = 4)]
+    states: usize,
+    /// Surface points per state for the instantiation distance (method.md: 2048).
+    #[arg(long, env = "PHYSNAP_EVAL_POINTS", default_value_t = 512)]
+    points: usize,
+    /// MMD/COV/1-NNA set order: pointflow (PhysNAP, default) or nap (NAP's original code).
+    #[arg(long, env = "PHYSNAP_EVAL_ORDER", default_value = "pointflow")]
+    order: String,
+    /// Marching-cubes grid cells per axis for the samples.
+    #[arg(long, env = "PHYSNAP_MC_RESOLUTION", default_value_t = 32)]
+    resolution: usize,
+    /// Seed (samples, reference choice, state sampling).
+    #[arg(long, env = "PHYSNAP_SEED", default_value_t = 12345)]
+    seed: u64,
+    /// Also write the report as JSON here.
+    #[arg(long, env = "PHYSNAP_EVAL_OUT")]
+    out: Option<PathBuf>,
+    /// Record the report under `metrics` in the weights' manifest.json.
+    #[arg(long, env = "PHYSNAP_EVAL_WRITE_MANIFEST")]
+    write_manifest: bool,
 }
 
 #[derive(Subcommand, Debug)]
@@ -180,13 +231,6 @@ struct GenerateArgs {
     /// DDIM noise level η in [0, 1].
     #[arg(long, env = "PHYSNAP_DDIM_ETA", default_value_t = 0.0)]
     eta: f64,
-}
-
-#[derive(Subcommand, Debug)]
-enum EvalCommand {
-    /// Guidance metrics (E_pc, D_pc, E_pen, E_mob medians) per variant on test scans; writes
-    /// guided_table.md and guided_table.json.
-    Guided(EvalGuidedArgs),
 }
 
 #[derive(Args, Debug)]
@@ -410,14 +454,15 @@ fn run(command: Command) -> anyhow::Result<()> {
             TrainCommand::Diffusion(a) => model_cmd::diffusion(a),
         },
         Command::Generate(a) => model_cmd::generate(a),
-        Command::Eval { command } => match command {
-            EvalCommand::Guided(a) => model_cmd::eval_guided(a),
-        },
         Command::Data { command } => match command {
             DataCommand::Synth(a) => data_cmd::synth(a),
             DataCommand::Import(a) => data_cmd::import(a),
             DataCommand::Scan(a) => data_cmd::scan(a),
             DataCommand::Testset(a) => data_cmd::testset(a),
+        },
+        Command::Eval { command } => match command {
+            EvalCommand::Generative(a) => eval_cmd::generative(a),
+            EvalCommand::Guided(a) => model_cmd::eval_guided(a),
         },
     }
 }

@@ -12,6 +12,7 @@ const TRANSPORT_FREE: &[&str] = &[
     "src/mesh",
     "src/model",
     "src/engine",
+    "src/eval",
 ];
 const FORBIDDEN: &[&str] = &["serde", "axum", "tonic", "prost", "utoipa"];
 

@@ -1,8 +1,9 @@
-//! Evaluation: PhysNAP's guidance metrics ([`guided`]).
+//! Evaluation: the metrics the paper reports, computed on our own generated and reference
+//! objects. [`generative`] holds NAP's distribution metrics (§7 of method.md); [`guided`] holds
+//! PhysNAP's guidance metrics (E_pc, D_pc, E_pen, E_mob, §8.8) and the Table 1 runner.
 //!
-//! Why it exists: the paper's Table 1 compares guidance variants by how well samples fit the
-//! observed cloud (E_pc, D_pc) and how physically plausible they are (E_pen, E_mob). These are
-//! pure functions of a generated sample; the generative metrics (MMD, COV, 1-NNA) live beside
-//! them.
+//! Why a separate layer: metrics are pure functions of objects, meshes and clouds; they never
+//! touch the network or the transports, so the CLI, tests and benchmarks share them.
 
+pub mod generative;
 pub mod guided;

@@ -1,0 +1,341 @@
+//! `physnap eval generative`: sample the trained prior, compare the samples with the held-out
+//! test split by instantiation distance, and print validity, MMD / COV / 1-NNA and the
+//! category accuracy of conditioned samples (issue 4's quality targets).
+
+use std::ops::ControlFlow;
+use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use rayon::prelude::*;
+use serde_json::json;
+
+use physnap::data::categories::category_index;
+use physnap::data::dataset::load_object_meshes;
+use physnap::data::rng::Rng;
+use physnap::engine::generate::{GenerateRequest, Generated, generate as run_generate};
+use physnap::engine::schedule::Schedule;
+use physnap::eval::generative::{
+    IdOptions, MetricOrder, StateClouds, distance_matrix, distribution_metrics, invalid_reason,
+    state_clouds,
+};
+use physnap::io::manifest::{LoadedModels, load_models};
+use physnap::mesh::MeshingOptions;
+use physnap::model::shape_prior::LatentSdfDecoder;
+
+use super::EvalGenerativeArgs;
+
+/// Reference objects: `n` test-split objects (seeded choice), with their category names.
+fn references(
+    data: &Path,
+    n: usize,
+    seed: u64,
+) -> anyhow::Result<
+    Vec<(
+        String,
+        physnap::object::ArticulatedObject,
+        Vec<physnap::mesh::TriMesh>,
+    )>,
+> {
+    let index_path = data.join("dataset.json");
+    let index: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(&index_path)
+            .with_context(|| format!("reading {}", index_path.display()))?,
+    )
+    .with_context(|| format!("parsing {}", index_path.display()))?;
+    let mut ids: Vec<String> = index["splits"]["test"]
+        .as_array()
+        .with_context(|| format!("{}: no test split", index_path.display()))?
+        .iter()
+        .filter_map(|v| v.as_str().map(String::from))
+        .collect();
+    if ids.is_empty() {
+        bail!("{}: the test split is empty", index_path.display());
+    }
+    let mut rng = Rng::new(seed);
+    for i in (1..ids.len()).rev() {
+        ids.swap(i, rng.int(0, i));
+    }
+    ids.truncate(n);
+    ids.sort();
+    ids.par_iter()
+        .map(|id| {
+            let (obj, meshes) = load_object_meshes(&data.join("objects").join(id))?;
+            let cat = obj.category.clone().unwrap_or_default();
+            Ok((cat, obj, meshes))
+        })
+        .collect()
+}
+
+fn sample_set(
+    models: &LoadedModels,
+    category: Option<usize>,
+    samples: usize,
+    seed: u64,
+    resolution: usize,
+    pb: &indicatif::ProgressBar,
+) -> anyhow::Result<Vec<Generated>> {
+    let decoder = LatentSdfDecoder::new(&models.shape_prior.decoder);
+    let req = GenerateRequest {
+        seed,
+        samples,
+        category,
+        category_name: category.map(|i| models.manifest.categories[i].clone()),
+        meshing: MeshingOptions { resolution },
+        ..Default::default()
+    };
+    Ok(run_generate(
+        &models.denoiser,
+        &decoder,
+        &models.manifest.feature_scales,
+        &Schedule::default(),
+        &req,
+        &mut |e| {
+            if e.step.step == e.step.total {
+                pb.inc(1);
+            }
+            ControlFlow::Continue(())
+        },
+    )?)
+}
+
+pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
+    let started = Instant::now();
+    let order = match a.order.as_str() {
+        "pointflow" => MetricOrder::PointFlow,
+        "nap" => MetricOrder::Nap,
+        other => bail!("invalid --order {other:?} (must be pointflow or nap)"),
+    };
+    let id = IdOptions {
+        states: a.states,
+        points: a.points,
+    };
+    id.validate()?;
+    MeshingOptions {
+        resolution: a.resolution,
+    }
+    .validate()?;
+    if a.samples < 2 || a.refs < 2 {
+        bail!(
+            "invalid --samples/--refs: {}/{} (each must be at least 2 for 1-NNA)",
+            a.samples,
+            a.refs
+        );
+    }
+    let device = physnap::model::cpu();
+    let models = load_models(&a.weights, &device)
+        .with_context(|| format!("loading weights from {}", a.weights.display()))?;
+
+    eprintln!("loading {} reference objects (test split)…", a.refs);
+    let refs = references(&a.data, a.refs, a.seed)?;
+    let ref_cats: Vec<String> = refs.iter().map(|r| r.0.clone()).collect();
+    let ref_clouds: Vec<StateClouds> = refs
+        .par_iter()
+        .enumerate()
+        .map(|(k, (_, o, m))| state_clouds(o, m, &id, a.seed ^ (k as u64) << 20))
+        .collect::<Result<_, _>>()?;
+
+    // Conditional runs: every category present among the references.
+    let mut cats: Vec<String> = ref_cats.clone();
+    cats.sort();
+    cats.dedup();
+    let conditional = a.per_category > 0 && models.manifest.denoiser.config.categories > 0;
+    let total_samples = a.samples
+        + if conditional {
+            cats.len() * a.per_category
+        } else {
+            0
+        };
+    let pb = super::progress_bar(total_samples, "sample");
+    let uncond = sample_set(&models, None, a.samples, a.seed, a.resolution, &pb)?;
+    let mut cond: Vec<(String, Generated)> = Vec::new();
+    if conditional {
+        for (ci, c) in cats.iter().enumerate() {
+            let idx = category_index(c).with_context(|| format!("unknown category {c:?}"))?;
+            let seed = a.seed + 1_000_000 * (ci as u64 + 1);
+            for g in sample_set(&models, Some(idx), a.per_category, seed, a.resolution, &pb)? {
+                cond.push((c.clone(), g));
+            }
+        }
+    }
+    pb.finish_and_clear();
+    let sampling_s = started.elapsed().as_secs_f64();
+
+    let valid: Vec<&Generated> = uncond
+        .iter()
+        .filter(|g| invalid_reason(&g.object, &g.meshes).is_none())
+        .collect();
+    let mut reasons: Vec<String> = uncond
+        .iter()
+        .filter_map(|g| invalid_reason(&g.object, &g.meshes))
+        .collect();
+    reasons.sort();
+    let valid_rate = valid.len() as f64 / uncond.len() as f64;
+    let clouds = |gs: &[&Generated], salt: u64| -> anyhow::Result<Vec<StateClouds>> {
+        Ok(gs
+            .par_iter()
+            .map(|g| state_clouds(&g.object, &g.meshes, &id, salt ^ g.seed))
+            .collect::<Result<_, _>>()?)
+    };
+    let gen_clouds = clouds(&valid, 0x5eed)?;
+    let cond_valid: Vec<&(String, Generated)> = cond
+        .iter()
+        .filter(|(_, g)| invalid_reason(&g.object, &g.meshes).is_none())
+        .collect();
+    let cond_clouds = clouds(
+        &cond_valid.iter().map(|(_, g)| g).collect::<Vec<_>>(),
+        0xca7,
+    )?;
+
+    let pairs = gen_clouds.len() * ref_clouds.len()
+        + gen_clouds.len() * gen_clouds.len().saturating_sub(1) / 2
+        + ref_clouds.len() * ref_clouds.len().saturating_sub(1) / 2
+        + cond_clouds.len() * ref_clouds.len();
+    let pb = super::progress_bar(pairs, "ID pairs");
+    let done = AtomicUsize::new(0);
+    let tick = |n: usize| {
+        let d = done.fetch_add(n, Ordering::Relaxed) + n;
+        if d.is_multiple_of(64) || d == pairs {
+            pb.set_position(d as u64);
+        }
+    };
+    let t_id = Instant::now();
+    let d_gr = distance_matrix(&gen_clouds, &ref_clouds, false, &tick);
+    let d_gg = distance_matrix(&gen_clouds, &gen_clouds, true, &tick);
+    let d_rr = distance_matrix(&ref_clouds, &ref_clouds, true, &tick);
+    let d_cr = distance_matrix(&cond_clouds, &ref_clouds, false, &tick);
+    pb.finish_and_clear();
+    let id_s = t_id.elapsed().as_secs_f64();
+
+    let metrics = if gen_clouds.len() >= 2 {
+        Some(distribution_metrics(&d_gr, &d_gg, &d_rr, order)?)
+    } else {
+        None
+    };
+    // Category accuracy: the nearest reference of a conditioned sample has its category.
+    let mut per_cat: Vec<(String, usize, usize)> = cats.iter().map(|c| (c.clone(), 0, 0)).collect();
+    for ((c, _), row) in cond_valid.iter().zip(&d_cr) {
+        let nn = row
+            .iter()
+            .enumerate()
+            .min_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(i, _)| i)
+            .unwrap_or(0);
+        let e = per_cat
+            .iter_mut()
+            .find(|e| &e.0 == c)
+            .expect("known category");
+        e.2 += 1;
+        if &ref_cats[nn] == c {
+            e.1 += 1;
+        }
+    }
+    // Invalid conditioned samples count as misses.
+    for (c, g) in &cond {
+        if invalid_reason(&g.object, &g.meshes).is_some() {
+            per_cat.iter_mut().find(|e| &e.0 == c).expect("known").2 += 1;
+        }
+    }
+    let (hits, tries) = per_cat.iter().fold((0, 0), |s, e| (s.0 + e.1, s.1 + e.2));
+    let cat_acc = (tries > 0).then(|| hits as f64 / tries as f64);
+
+    println!(
+        "generative evaluation ({} order) of {}",
+        a.order,
+        a.weights.display()
+    );
+    println!(
+        "  references: {} test objects; ID: {} states × {} points; meshing {}³",
+        refs.len(),
+        a.states,
+        a.points,
+        a.resolution
+    );
+    println!(
+        "  unconditional: {} samples, valid {:.1}% ({} invalid{})",
+        uncond.len(),
+        100.0 * valid_rate,
+        uncond.len() - valid.len(),
+        if reasons.is_empty() {
+            String::new()
+        } else {
+            format!(
+                ": {}",
+                reasons
+                    .iter()
+                    .take(3)
+                    .cloned()
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            )
+        }
+    );
+    if let Some(m) = metrics {
+        println!(
+            "  MMD {:.5}   COV {:.3}   1-NNA {:.3}",
+            m.mmd, m.cov, m.one_nna
+        );
+    }
+    if let Some(acc) = cat_acc {
+        println!(
+            "  category accuracy (nearest test object has the requested category): {:.1}% ({hits}/{tries})",
+            100.0 * acc
+        );
+        for (c, h, t) in &per_cat {
+            println!("    {c:<18} {h}/{t}");
+        }
+    }
+    let wall = started.elapsed().as_secs_f64();
+    println!("  time: sampling+meshing {sampling_s:.0} s, ID {id_s:.0} s, total {wall:.0} s");
+
+    let report = json!({
+        "format": "physnap.eval_generative/v1",
+        "weights": a.weights.display().to_string(),
+        "data": a.data.display().to_string(),
+        "order": a.order,
+        "seed": a.seed,
+        "references": refs.len(),
+        "id": { "states": a.states, "points": a.points },
+        "meshing_resolution": a.resolution,
+        "unconditional": {
+            "samples": uncond.len(),
+            "valid": valid.len(),
+            "valid_rate": valid_rate,
+            "invalid_reasons": reasons,
+            "mmd": metrics.map(|m| m.mmd),
+            "cov": metrics.map(|m| m.cov),
+            "one_nna": metrics.map(|m| m.one_nna),
+        },
+        "conditional": {
+            "per_category": a.per_category,
+            "accuracy": cat_acc,
+            "categories": per_cat.iter().map(|(c, h, t)| json!({"category": c, "hits": h, "samples": t})).collect::<Vec<_>>(),
+        },
+        "seconds": { "sampling": sampling_s, "id": id_s, "total": wall },
+        "command": std::env::args().collect::<Vec<_>>().join(" "),
+    });
+    if a.write_manifest {
+        // Record the figures in the weights' manifest (the weights files and their sha256 are
+        // untouched): metrics.generative = this report, metrics.shape_val_iou from training.
+        let path = a.weights.join("manifest.json");
+        let mut m: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path)?)
+            .with_context(|| format!("parsing {}", path.display()))?;
+        let iou = m["training"]["shape"]["val_iou"].clone();
+        if !m["metrics"].is_object() {
+            m["metrics"] = json!({});
+        }
+        m["metrics"]["generative"] = report.clone();
+        m["metrics"]["shape_val_iou"] = iou;
+        let tmp = path.with_extension("json.tmp");
+        std::fs::write(&tmp, serde_json::to_string_pretty(&m)? + "\n")?;
+        std::fs::rename(&tmp, &path)?;
+        println!("  metrics recorded in {}", path.display());
+    }
+    if let Some(out) = &a.out {
+        std::fs::write(out, serde_json::to_string_pretty(&report)? + "\n")
+            .with_context(|| format!("writing {}", out.display()))?;
+        println!("  report: {}", out.display());
+    }
+    Ok(())
+}

@@ -74,6 +74,9 @@ enum EvalCommand {
     /// Sample the prior and compare with the test split: validity, MMD / COV / 1-NNA by
     /// instantiation distance, category accuracy of conditioned samples.
     Generative(EvalGenerativeArgs),
+    /// Guidance metrics (E_pc, D_pc, E_pen, E_mob medians) per variant on test scans, in the
+    /// paper's Table 1 layout; writes guided_table.md and guided_table.json.
+    Guided(EvalGuidedArgs),
 }
 
 #[derive(Args, Debug)]
@@ -206,6 +209,82 @@ struct GenerateArgs {
     /// Marching-cubes grid cells per axis.
     #[arg(long, env = "PHYSNAP_MC_RESOLUTION", default_value_t = physnap::mesh::DEFAULT_RESOLUTION)]
     resolution: usize,
+    /// Observed partial point cloud (PLY, NPY or JSON; object frame, metres): PhysNAP guidance
+    /// (pc+pen+mob by default), samples ranked by D_pc into ranking.json.
+    #[arg(long, env = "PHYSNAP_POINTS")]
+    points: Option<PathBuf>,
+    /// Weight of the point-cloud loss (default with --points: 45 ÷ active terms).
+    #[arg(long, env = "PHYSNAP_W_PC")]
+    w_pc: Option<f64>,
+    /// Weight of the penetration loss (default with --points: 2 ÷ active terms; 0 turns it off).
+    #[arg(long, env = "PHYSNAP_W_PEN")]
+    w_pen: Option<f64>,
+    /// Weight of the mobility loss (default with --points: 2 ÷ active terms; 0 turns it off).
+    #[arg(long, env = "PHYSNAP_W_MOB")]
+    w_mob: Option<f64>,
+    /// Guide the steps with diffusion time t < this (n_g).
+    #[arg(long, env = "PHYSNAP_GUIDANCE_STEPS", default_value_t = physnap::engine::guidance::DEFAULT_GUIDED_STEPS)]
+    guidance_steps: usize,
+    /// Temperature τ of the point-to-part soft assignment.
+    #[arg(long, env = "PHYSNAP_TAU", default_value_t = physnap::engine::guidance::DEFAULT_TAU)]
+    tau: f64,
+    /// Clamp each guidance-gradient entry to ±this (model space); a deviation from the paper's
+    /// raw gradient, off by default.
+    #[arg(long, env = "PHYSNAP_GUIDANCE_MAX_STEP")]
+    guidance_max_step: Option<f64>,
+    /// Reverse-step rule: ddpm (NAP; strided ancestral with --steps) or ddim.
+    #[arg(long, env = "PHYSNAP_SAMPLER", default_value = "ddpm", value_parser = ["ddpm", "ddim"])]
+    sampler: String,
+    /// Reverse steps (0: all 1000).
+    #[arg(long, env = "PHYSNAP_STEPS", default_value_t = 0)]
+    steps: usize,
+    /// DDIM noise level η in [0, 1].
+    #[arg(long, env = "PHYSNAP_DDIM_ETA", default_value_t = 0.0)]
+    eta: f64,
+}
+
+#[derive(Args, Debug)]
+struct EvalGuidedArgs {
+    /// Weights directory with manifest.json.
+    #[arg(long, env = "PHYSNAP_WEIGHTS", default_value = "weights")]
+    weights: PathBuf,
+    /// Test scans: a `physnap data testset` folder (testset.json gives categories) or a folder
+    /// of .ply/.npy/.json clouds (no categories: category-aware rows are skipped).
+    #[arg(long, env = "PHYSNAP_CLOUDS")]
+    clouds: PathBuf,
+    /// Samples per cloud and variant (paper: 15).
+    #[arg(long, env = "PHYSNAP_SAMPLES_PER_CLOUD", default_value_t = 15)]
+    samples_per_cloud: usize,
+    /// Use at most this many clouds (0: all; paper: 30).
+    #[arg(long, env = "PHYSNAP_MAX_CLOUDS", default_value_t = 0)]
+    max_clouds: usize,
+    /// Seed of the first sample.
+    #[arg(long, env = "PHYSNAP_SEED", default_value_t = 0)]
+    seed: u64,
+    /// Guide the steps with diffusion time t < this (n_g).
+    #[arg(long, env = "PHYSNAP_GUIDANCE_STEPS", default_value_t = physnap::engine::guidance::DEFAULT_GUIDED_STEPS)]
+    guidance_steps: usize,
+    /// Temperature τ.
+    #[arg(long, env = "PHYSNAP_TAU", default_value_t = physnap::engine::guidance::DEFAULT_TAU)]
+    tau: f64,
+    /// Clamp each guidance-gradient entry to ±this (a deviation from the paper; off by default).
+    #[arg(long, env = "PHYSNAP_GUIDANCE_MAX_STEP")]
+    guidance_max_step: Option<f64>,
+    /// Reverse-step rule: ddpm or ddim.
+    #[arg(long, env = "PHYSNAP_SAMPLER", default_value = "ddpm", value_parser = ["ddpm", "ddim"])]
+    sampler: String,
+    /// Reverse steps (0: all 1000).
+    #[arg(long, env = "PHYSNAP_STEPS", default_value_t = 0)]
+    steps: usize,
+    /// DDIM noise level η.
+    #[arg(long, env = "PHYSNAP_DDIM_ETA", default_value_t = 0.0)]
+    eta: f64,
+    /// Marching-cubes grid cells per axis (for D_pc).
+    #[arg(long, env = "PHYSNAP_MC_RESOLUTION", default_value_t = physnap::mesh::DEFAULT_RESOLUTION)]
+    resolution: usize,
+    /// Output directory for guided_table.md / .json.
+    #[arg(long, env = "PHYSNAP_OUT")]
+    out: PathBuf,
 }
 
 #[derive(Subcommand, Debug)]
@@ -397,6 +476,7 @@ fn run(command: Command) -> anyhow::Result<()> {
         },
         Command::Eval { command } => match command {
             EvalCommand::Generative(a) => eval_cmd::generative(a),
+            EvalCommand::Guided(a) => model_cmd::eval_guided(a),
         },
     }
 }

@@ -6,18 +6,23 @@ use std::path::Path;
 use anyhow::{Context, bail};
 
 use physnap::data::categories::category_index;
-use physnap::engine::generate::{GenerateRequest, generate as run_generate};
+use physnap::engine::EngineError;
+use physnap::engine::generate::{GenerateRequest, generate_with as run_generate};
+use physnap::engine::guidance::{GuidanceOptions, SdfField, Terms};
+use physnap::engine::sample::Sampler;
 use physnap::engine::schedule::Schedule;
+use physnap::eval::guided::metrics as guided_metrics;
 use physnap::export::{ExportOptions, export_dir};
 use physnap::io::manifest::{Entry, Manifest, load_models, to_string as manifest_to_string};
 use physnap::mesh::MeshingOptions;
 use physnap::model::denoiser::DenoiserConfig;
 use physnap::model::shape_prior::LatentSdfDecoder;
 use physnap::model::weights::sha256_hex;
+use physnap::pointcloud::{Limits, PointCloud};
 use physnap::train::diffusion::{DiffusionTrainConfig, load_data, train_diffusion};
 use physnap::train::shape::{ShapeTrainConfig, read_model_config, train_shape};
 
-use super::{DiffusionArgs, GenerateArgs, ShapeArgs};
+use super::{DiffusionArgs, EvalGuidedArgs, GenerateArgs, ShapeArgs};
 
 pub fn shape(a: ShapeArgs) -> anyhow::Result<()> {
     let defaults = ShapeTrainConfig::default();
@@ -152,6 +157,11 @@ pub fn generate(a: GenerateArgs) -> anyhow::Result<()> {
     if a.samples == 0 {
         bail!("invalid --samples: 0 (must be at least 1)");
     }
+    let guidance = guidance_options(&a)?;
+    let sampler = match a.sampler.as_str() {
+        "ddim" => Sampler::Ddim { eta: a.eta },
+        _ => Sampler::Ddpm,
+    };
     let req = GenerateRequest {
         seed: a.seed,
         samples: a.samples,
@@ -160,30 +170,74 @@ pub fn generate(a: GenerateArgs) -> anyhow::Result<()> {
         meshing: MeshingOptions {
             resolution: a.resolution,
         },
+        guidance: guidance.clone(),
+        sampler,
+        steps: a.steps,
         ..Default::default()
     };
     req.meshing.validate()?;
     let schedule = Schedule::default();
-    let pb = super::progress_bar(a.samples * schedule.len(), "generate");
+    let steps = physnap::engine::schedule::timesteps(schedule.len(), a.steps).len();
+    let pb = super::progress_bar(a.samples * steps, "generate");
     let decoder = LatentSdfDecoder::new(&models.shape_prior.decoder);
-    let results = run_generate(
-        &models.denoiser,
-        &decoder,
-        &models.manifest.feature_scales,
-        &schedule,
-        &req,
-        &mut |e| {
-            pb.set_position((e.sample * e.step.total + e.step.step) as u64);
-            ControlFlow::Continue(())
-        },
-    )?;
+    let started = std::time::Instant::now();
+    let mut last_losses = None;
+    // One request per sample (sample i uses seed + i either way), so a guided sample that
+    // diverges is reported and the others still count for best-of-N.
+    let mut results = Vec::new();
+    let mut diverged = Vec::new();
+    for i in 0..a.samples {
+        let one = GenerateRequest {
+            seed: a.seed.wrapping_add(i as u64),
+            samples: 1,
+            ..req.clone()
+        };
+        let r = run_generate(
+            &models.denoiser,
+            &decoder,
+            Some(&decoder as &dyn SdfField),
+            &models.manifest.feature_scales,
+            &schedule,
+            &one,
+            &mut |e| {
+                pb.set_position((i * e.step.total + e.step.step) as u64);
+                if let Some(l) = e.step.guidance {
+                    last_losses = Some(l);
+                }
+                ControlFlow::Continue(())
+            },
+        );
+        match r {
+            Ok(mut out) => {
+                let mut g = out.remove(0);
+                g.index = i;
+                g.object.name = format!("sample_{i:03}");
+                results.push(g);
+            }
+            Err(e @ EngineError::Diverged { .. }) => {
+                pb.println(format!("sample_{i:03} (seed {}): {e}", one.seed));
+                diverged.push((format!("sample_{i:03}"), one.seed, e.to_string()));
+            }
+            Err(e) => return Err(e.into()),
+        }
+    }
     pb.finish_and_clear();
+    if results.is_empty() {
+        bail!(
+            "all {} samples diverged (first: {}); lower the guidance weights (--w-pc/--w-pen/--w-mob) or --guidance-steps",
+            a.samples,
+            diverged.first().map(|d| d.2.as_str()).unwrap_or("")
+        );
+    }
+    let per_sample = started.elapsed().as_secs_f64() / a.samples as f64;
     let opts = ExportOptions {
         meshing: req.meshing,
         ..Default::default()
     };
+    let mut rows = Vec::new();
     for g in &results {
-        let dir = a.out.join(format!("sample_{:03}", g.index));
+        let name = format!("sample_{:03}", g.index);
+        let dir = a.out.join(&name);
         export_dir(&g.object, &g.meshes, &dir, &opts)?;
         println!(
             "{}: {} parts, {} joints (seed {})",
@@ -192,6 +246,272 @@ pub fn generate(a: GenerateArgs) -> anyhow::Result<()> {
             g.object.joints.len(),
             g.seed
         );
+        if let Some(opts) = &guidance {
+            let m = guided_metrics(&decoder, &g.raw, &g.meshes, &opts.points);
+            rows.push((name, g.seed, m));
+        }
     }
+    println!("{per_sample:.1} s per sample (sampling + meshing)");
+    if let Some(l) = last_losses {
+        println!(
+            "last guided step: ℓ_pc {:.4e}, ℓ_pen {:.4e}, ℓ_mob {:.4e}, weighted {:.4e}",
+            l.pc, l.pen, l.mob, l.total
+        );
+    }
+    if let (Some(opts), Some(points)) = (&guidance, &a.points) {
+        write_ranking(&a.out, points, opts, rows, &diverged)?;
+    }
+    Ok(())
+}
+
+/// The guidance of `generate`: paper defaults for the terms that are on, flags override.
+fn guidance_options(a: &GenerateArgs) -> anyhow::Result<Option<GuidanceOptions>> {
+    let points = match &a.points {
+        Some(path) => {
+            let cloud = PointCloud::read(
+                path,
+                &Limits {
+                    min_points: 1,
+                    max_points: physnap::engine::guidance::MAX_POINTS,
+                },
+            )
+            .with_context(|| format!("invalid --points {}", path.display()))?;
+            cloud.points
+        }
+        None => Vec::new(),
+    };
+    if points.is_empty() && a.w_pc.is_some_and(|w| w > 0.0) {
+        bail!("invalid --w-pc: needs --points (the observed point cloud)");
+    }
+    if points.is_empty() && a.w_pen.is_none() && a.w_mob.is_none() {
+        return Ok(None);
+    }
+    let terms = Terms {
+        pc: !points.is_empty() && a.w_pc.is_none_or(|w| w > 0.0),
+        pen: a.w_pen.is_none_or(|w| w > 0.0),
+        mob: a.w_mob.is_none_or(|w| w > 0.0),
+    };
+    let paper = GuidanceOptions::paper(points, terms);
+    let opts = GuidanceOptions {
+        w_pc: a.w_pc.unwrap_or(paper.w_pc),
+        w_pen: a.w_pen.unwrap_or(paper.w_pen),
+        w_mob: a.w_mob.unwrap_or(paper.w_mob),
+        steps: a.guidance_steps,
+        tau: a.tau,
+        max_step: a.guidance_max_step,
+        ..paper
+    };
+    opts.validate(Schedule::default().len())?;
+    Ok(Some(opts))
+}
+
+/// `ranking.json`: samples by ascending D_pc (the paper's best-of-N), the best one marked.
+fn write_ranking(
+    out: &Path,
+    points: &Path,
+    opts: &GuidanceOptions,
+    mut rows: Vec<(String, u64, physnap::eval::guided::GuidedMetrics)>,
+    diverged: &[(String, u64, String)],
+) -> anyhow::Result<()> {
+    rows.sort_by(|a, b| {
+        let key = |m: &physnap::eval::guided::GuidedMetrics| {
+            if m.d_pc.is_finite() {
+                m.d_pc
+            } else {
+                f64::INFINITY
+            }
+        };
+        key(&a.2).total_cmp(&key(&b.2)).then(a.0.cmp(&b.0))
+    });
+    let num = |v: f64| {
+        if v.is_finite() {
+            serde_json::json!(v)
+        } else {
+            serde_json::Value::Null
+        }
+    };
+    let ranked: Vec<serde_json::Value> = rows
+        .iter()
+        .enumerate()
+        .map(|(r, (name, seed, m))| {
+            serde_json::json!({
+                "rank": r + 1,
+                "sample": name,
+                "seed": seed,
+                "best": r == 0,
+                "d_pc": num(m.d_pc),
+                "e_pc": num(m.e_pc),
+                "e_pen": num(m.e_pen),
+                "e_mob": num(m.e_mob),
+            })
+        })
+        .collect();
+    let best = rows.first().map(|r| r.0.clone());
+    let doc = serde_json::json!({
+        "format": "physnap.ranking/v1",
+        "points": points.display().to_string(),
+        "ranked_by": "d_pc (mean point-to-mesh distance, m)",
+        "guidance": {
+            "w_pc": opts.w_pc, "w_pen": opts.w_pen, "w_mob": opts.w_mob,
+            "steps": opts.steps, "tau": opts.tau,
+        },
+        "best": best,
+        "samples": ranked,
+        "diverged": diverged.iter().map(|(name, seed, error)| serde_json::json!({
+            "sample": name, "seed": seed, "error": error,
+        })).collect::<Vec<_>>(),
+    });
+    let path = out.join("ranking.json");
+    std::fs::write(&path, serde_json::to_string_pretty(&doc)? + "\n")?;
+    for (r, (name, _, m)) in rows.iter().enumerate() {
+        println!(
+            "{}{}: D_pc {:.4} E_pc {:.5} E_pen {:.5} E_mob {:.5}",
+            if r == 0 { "best " } else { "     " },
+            name,
+            m.d_pc,
+            m.e_pc,
+            m.e_pen,
+            m.e_mob
+        );
+    }
+    println!("ranking: {}", path.display());
+    Ok(())
+}
+
+/// Clouds of `dir`: from testset.json when present (with categories), else every cloud file.
+fn read_clouds(dir: &Path, max: usize) -> anyhow::Result<Vec<physnap::eval::guided::Cloud>> {
+    let limits = Limits {
+        min_points: 1,
+        max_points: physnap::engine::guidance::MAX_POINTS,
+    };
+    let index = dir.join("testset.json");
+    let mut entries: Vec<(String, Option<usize>, std::path::PathBuf)> = Vec::new();
+    if index.is_file() {
+        let doc: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&index)?)
+            .with_context(|| format!("parsing {}", index.display()))?;
+        for c in doc["clouds"].as_array().into_iter().flatten() {
+            let id = c["id"].as_str().unwrap_or_default().to_string();
+            let file = c["cloud"].as_str().with_context(|| {
+                format!("{}: cloud entry without a \"cloud\" file", index.display())
+            })?;
+            let category = c["category"].as_str().and_then(category_index);
+            entries.push((id, category, dir.join(file)));
+        }
+    } else {
+        let mut files: Vec<_> = std::fs::read_dir(dir)
+            .with_context(|| format!("invalid --clouds {}", dir.display()))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| physnap::pointcloud::Format::from_path(p).is_some())
+            .collect();
+        files.sort();
+        for p in files {
+            let id = p
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            entries.push((id, None, p));
+        }
+    }
+    if max > 0 {
+        entries.truncate(max);
+    }
+    if entries.is_empty() {
+        bail!(
+            "invalid --clouds {}: no point clouds (must hold testset.json or .ply/.npy/.json files)",
+            dir.display()
+        );
+    }
+    entries
+        .into_iter()
+        .map(|(id, category, path)| {
+            let cloud = PointCloud::read(&path, &limits)
+                .with_context(|| format!("reading {}", path.display()))?;
+            Ok(physnap::eval::guided::Cloud {
+                id,
+                category,
+                points: cloud.points,
+            })
+        })
+        .collect()
+}
+
+pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
+    use physnap::eval::guided::{TableOptions, guided_table, table_markdown};
+    if a.samples_per_cloud == 0 {
+        bail!("invalid --samples-per-cloud: 0 (must be at least 1)");
+    }
+    let device = physnap::model::cpu();
+    let models = load_models(&a.weights, &device)?;
+    let clouds = read_clouds(&a.clouds, a.max_clouds)?;
+    let meshing = MeshingOptions {
+        resolution: a.resolution,
+    };
+    meshing.validate()?;
+    let conditional = models.manifest.denoiser.config.categories > 0;
+    let opts = TableOptions {
+        samples_per_cloud: a.samples_per_cloud,
+        seed: a.seed,
+        category_aware: if conditional {
+            vec![false, true]
+        } else {
+            vec![false]
+        },
+        guided_steps: a.guidance_steps,
+        tau: a.tau,
+        max_step: a.guidance_max_step,
+        sampler: match a.sampler.as_str() {
+            "ddim" => Sampler::Ddim { eta: a.eta },
+            _ => Sampler::Ddpm,
+        },
+        steps: a.steps,
+        meshing,
+    };
+    let decoder = LatentSdfDecoder::new(&models.shape_prior.decoder);
+    let blocks = opts.category_aware.len();
+    let pb = super::progress_bar(
+        blocks * 5 * clouds.len() * a.samples_per_cloud,
+        "eval guided",
+    );
+    let rows = guided_table(
+        &models.denoiser,
+        &decoder,
+        &models.manifest.feature_scales,
+        &Schedule::default(),
+        &clouds,
+        &opts,
+        &mut |done, _| pb.set_position(done as u64),
+    )?;
+    pb.finish_and_clear();
+    let md = table_markdown(&rows);
+    print!("{md}");
+    std::fs::create_dir_all(&a.out)?;
+    std::fs::write(a.out.join("guided_table.md"), &md)?;
+    let num = |v: f64| {
+        if v.is_finite() {
+            serde_json::json!(v)
+        } else {
+            serde_json::Value::Null
+        }
+    };
+    let json = serde_json::json!({
+        "format": "physnap.guided_table/v1",
+        "clouds": clouds.iter().map(|c| c.id.clone()).collect::<Vec<_>>(),
+        "samples_per_cloud": a.samples_per_cloud,
+        "seed": a.seed, "guidance_steps": a.guidance_steps, "tau": a.tau,
+        "guidance_max_step": a.guidance_max_step,
+        "sampler": a.sampler, "steps": a.steps, "eta": a.eta,
+        "statistic": "median over all samples",
+        "rows": rows.iter().map(|r| serde_json::json!({
+            "category_aware": r.category_aware, "variant": r.variant,
+            "e_pc": num(r.e_pc), "d_pc": num(r.d_pc), "e_pen": num(r.e_pen), "e_mob": num(r.e_mob),
+            "mmd": null, "one_nna": null,
+            "samples": r.samples, "diverged": r.diverged, "seconds_per_sample": r.seconds_per_sample,
+        })).collect::<Vec<_>>(),
+    });
+    std::fs::write(
+        a.out.join("guided_table.json"),
+        serde_json::to_string_pretty(&json)? + "\n",
+    )?;
+    println!("table: {}", a.out.join("guided_table.md").display());
     Ok(())
 }

@@ -8,7 +8,8 @@
 use std::ops::ControlFlow;
 
 use super::EngineError;
-use super::sample::{SampleRequest, StepEvent, sample};
+use super::guidance::{GuidanceOptions, SdfField};
+use super::sample::{GuidanceContext, SampleRequest, Sampler, StepEvent, sample_guided};
 use super::schedule::Schedule;
 use crate::graph::{FeatureScales, GraphTensor, ProjectOptions, project};
 use crate::mesh::{MeshingOptions, TriMesh};
@@ -32,6 +33,12 @@ pub struct GenerateRequest {
     /// Attach x̂₀ previews to every this many steps' events (0: never); see
     /// [`SampleRequest::preview_every`].
     pub preview_every: usize,
+    /// PhysNAP loss guidance (None: plain NAP sampling); needs [`generate_with`] and a field.
+    pub guidance: Option<GuidanceOptions>,
+    /// Reverse-step rule.
+    pub sampler: Sampler,
+    /// Reverse steps (0: all of the schedule).
+    pub steps: usize,
 }
 
 /// One generated sample.
@@ -58,10 +65,26 @@ pub struct GenerateEvent {
     pub step: StepEvent,
 }
 
-/// Generate `req.samples` objects.
+/// Generate `req.samples` objects (unguided; a request with active guidance is refused with
+/// an error naming `guidance` — use [`generate_with`]).
 pub fn generate(
     denoiser: &Denoiser,
     decoder: &dyn LatentDecoder,
+    scales: &FeatureScales,
+    schedule: &Schedule,
+    req: &GenerateRequest,
+    on_step: &mut dyn FnMut(&GenerateEvent) -> ControlFlow<String>,
+) -> Result<Vec<Generated>, EngineError> {
+    generate_with(denoiser, decoder, None, scales, schedule, req, on_step)
+}
+
+/// Generate `req.samples` objects; `field` is the part SDF the guidance losses query (the
+/// trained shape decoder, e.g. the same `LatentSdfDecoder` as `decoder`), required when
+/// `req.guidance` has a positive weight.
+pub fn generate_with(
+    denoiser: &Denoiser,
+    decoder: &dyn LatentDecoder,
+    field: Option<&dyn SdfField>,
     scales: &FeatureScales,
     schedule: &Schedule,
     req: &GenerateRequest,
@@ -71,7 +94,7 @@ pub fn generate(
     let mut out = Vec::with_capacity(req.samples);
     for i in 0..req.samples {
         let seed = req.seed.wrapping_add(i as u64);
-        let graphs = sample(
+        let graphs = sample_guided(
             denoiser,
             schedule,
             &SampleRequest {
@@ -79,7 +102,11 @@ pub fn generate(
                 batch: 1,
                 category: req.category,
                 preview_every: req.preview_every,
+                guidance: req.guidance.clone(),
+                sampler: req.sampler,
+                steps: req.steps,
             },
+            field.map(|field| GuidanceContext { field, scales }),
             &device,
             &mut |s| {
                 on_step(&GenerateEvent {

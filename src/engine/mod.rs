@@ -1,4 +1,4 @@
-//! The generation engine: schedule, sampling loop, and (later) guidance.
+//! The generation engine: schedule, sampling loop, PhysNAP's loss guidance.
 //!
 //! Why it exists: this is the transport-free core that the CLI and the service both drive. It
 //! takes validated inputs (no serde, prost or HTTP types), runs the reverse diffusion on the
@@ -6,6 +6,7 @@
 //! and returns raw graphs for projection and export.
 
 pub mod generate;
+pub mod guidance;
 pub mod sample;
 pub mod schedule;
 
@@ -35,8 +36,9 @@ pub enum EngineError {
         /// Why.
         reason: String,
     },
-    /// The sample diverged (non-finite values), at the given step.
-    #[error("sampling diverged at step {step} (t = {t}): non-finite values in {what}")]
+    /// The sample diverged (non-finite values, or a guidance gradient beyond
+    /// `sample::DIVERGENCE_LIMIT`), at the given step.
+    #[error("sampling diverged at step {step} (t = {t}): non-finite or runaway values in {what}")]
     Diverged {
         /// Steps completed.
         step: usize,

@@ -12,6 +12,16 @@
 //! ```
 //!
 //! Indices are 0-based: t = T − 1 is the first reverse step, t = 0 the last.
+//!
+//! Fast sampling (fewer steps, the paper's future work) jumps from t to an earlier t' with the
+//! DDIM update (Song et al. 2021); η = 1 is the strided ancestral DDPM sampler, η = 0 DDIM:
+//!
+//! ```text
+//! σ = η · √((1 − ᾱ_t')/(1 − ᾱ_t)) · √(1 − ᾱ_t/ᾱ_t')
+//! x_t' = √ᾱ_t' x̂₀ + √(1 − ᾱ_t' − σ²) ε̂ + σ z           (after t = 0: x̂₀ itself)
+//! ```
+//!
+//! [`timesteps`] spreads S steps evenly over 999 … 0 (always including both ends).
 
 /// Number of diffusion steps NAP trains with.
 pub const NUM_STEPS: usize = 1000;
@@ -96,6 +106,28 @@ impl Schedule {
         }
     }
 
+    /// Coefficients of a jump from t to `t_prev` (< t), or to the end (None: x̂₀), with DDIM
+    /// noise level `eta` (1: strided DDPM, 0: deterministic DDIM).
+    pub fn jump_coefficients(&self, t: usize, t_prev: Option<usize>, eta: f64) -> StepCoefficients {
+        let (s, n) = self.noise_coefficients(t);
+        let Some(tp) = t_prev else {
+            return StepCoefficients {
+                c_x: 1.0 / s,
+                c_eps: n / s,
+                sigma: 0.0,
+            };
+        };
+        let (ab, abp) = (self.alpha_bar[t], self.alpha_bar[tp]);
+        let sigma = eta * ((1.0 - abp) / (1.0 - ab)).sqrt() * (1.0 - ab / abp).max(0.0).sqrt();
+        let dir = (1.0 - abp - sigma * sigma).max(0.0).sqrt();
+        // x' = √ᾱ' (x − n ε)/s + dir ε + σ z
+        StepCoefficients {
+            c_x: abp.sqrt() / s,
+            c_eps: abp.sqrt() * n / s - dir,
+            sigma,
+        }
+    }
+
     /// x̂₀ from x_t and ε̂ on plain slices (the tensor version lives with the sampler).
     pub fn predict_x0(&self, t: usize, x_t: &[f32], eps: &[f32]) -> Vec<f32> {
         let (s, n) = self.noise_coefficients(t);
@@ -104,6 +136,23 @@ impl Schedule {
             .map(|(x, e)| ((*x as f64 - n * *e as f64) / s) as f32)
             .collect()
     }
+}
+
+/// `steps` diffusion times spread evenly over `total − 1 … 0`, descending, both ends included
+/// (0 or ≥ total: every step).
+pub fn timesteps(total: usize, steps: usize) -> Vec<usize> {
+    if steps == 0 || steps >= total || total < 2 {
+        return (0..total).rev().collect();
+    }
+    if steps == 1 {
+        return vec![total - 1];
+    }
+    let mut out: Vec<usize> = (0..steps)
+        .map(|k| ((k as f64 * (total - 1) as f64) / (steps - 1) as f64).round() as usize)
+        .collect();
+    out.dedup();
+    out.reverse();
+    out
 }
 
 #[cfg(test)]
@@ -150,5 +199,40 @@ mod tests {
         }
         assert_eq!(s.step_coefficients(0).sigma, 0.0);
         assert!(s.step_coefficients(1).sigma > 0.0);
+    }
+
+    #[test]
+    fn jumps_generalise_the_ddpm_step() {
+        let s = Schedule::default();
+        // A jump from x_t with the true ε lands on √ᾱ' x₀ + √(1−ᾱ') ε for DDIM (η = 0).
+        let (x0, eps) = (0.7f64, -1.3f64);
+        for (t, tp) in [(999usize, 899usize), (500, 250), (10, 0)] {
+            let (a, b) = s.noise_coefficients(t);
+            let xt = a * x0 + b * eps;
+            let c = s.jump_coefficients(t, Some(tp), 0.0);
+            assert_eq!(c.sigma, 0.0);
+            let (ap, bp) = s.noise_coefficients(tp);
+            let got = c.c_x * xt - c.c_eps * eps;
+            assert!((got - (ap * x0 + bp * eps)).abs() < 1e-9, "{t}→{tp}: {got}");
+        }
+        // The end: x̂₀.
+        let c = s.jump_coefficients(0, None, 1.0);
+        let (a, b) = s.noise_coefficients(0);
+        assert!((c.c_x * (a * x0 + b * eps) - c.c_eps * eps - x0).abs() < 1e-9);
+        // η = 1 over one step: σ² is the posterior variance β̃_t = β_t (1−ᾱ_{t−1})/(1−ᾱ_t).
+        let c = s.jump_coefficients(500, Some(499), 1.0);
+        let post = s.beta[500] * (1.0 - s.alpha_bar[499]) / (1.0 - s.alpha_bar[500]);
+        assert!((c.sigma * c.sigma - post).abs() < 1e-12);
+    }
+
+    #[test]
+    fn timesteps_spread_evenly_and_include_both_ends() {
+        assert_eq!(timesteps(1000, 0).len(), 1000);
+        assert_eq!(timesteps(1000, 1000), (0..1000).rev().collect::<Vec<_>>());
+        let t = timesteps(1000, 4);
+        assert_eq!(t, vec![999, 666, 333, 0]);
+        let t = timesteps(1000, 100);
+        assert_eq!((t.len(), t[0], t[99]), (100, 999, 0));
+        assert!(t.windows(2).all(|w| w[0] > w[1]));
     }
 }

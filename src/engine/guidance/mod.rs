@@ -1,0 +1,317 @@
+//! PhysNAP's loss guidance (method.md §8.2–§8.7): the losses on the decoded x̂₀ and their
+//! weighted sum, as burn tensor code differentiable back to x_t.
+//!
+//! ```text
+//! ℓ(x̂₀) = w_pc ℓ_pc + w_pen ℓ_pen + w_mob ℓ_mob
+//! defaults (paper): w_pc,base = 45, w_pen,base = 2, w_mob,base = 2, each ÷ #active terms;
+//!                   guided steps n_g = 500 (the last ones, t < n_g); τ = 1000
+//! decoding (§8.3, §9 A8): raw = x̂₀ ⊙ feature scales; õ, c̃ clamped to [0, 1] where used;
+//!                   b ← max(|b|, 1e-4); Plücker lines projected in ℓ_mob
+//! ```
+//!
+//! Why it exists: the sampler ([`super::sample`]) only needs "loss and its value per term of a
+//! batch of x̂₀"; the terms live in one module each ([`pc`], [`pen`], [`mob`]) on the shared
+//! part SDF ([`field`]) and grid ([`grid`]). Inputs are validated here ([`GuidanceOptions::
+//! validate`]) so bad requests fail before any sampling.
+
+pub mod field;
+pub mod grid;
+pub mod mob;
+pub mod pc;
+pub mod pen;
+
+use burn::tensor::Tensor;
+
+use super::EngineError;
+use crate::data::rng::Rng;
+use crate::graph::{EDGE_DIM, K, NODE_DIM, NUM_EDGES, edge_ch, node_ch};
+pub use field::{BoxField, PartTensors, SdfField};
+
+/// Smallest half-extent used by the losses (§9 A8).
+pub const MIN_HALF_EXTENT: f32 = 1e-4;
+/// Paper base weight of ℓ_pc.
+pub const W_PC_BASE: f64 = 45.0;
+/// Paper base weight of ℓ_pen.
+pub const W_PEN_BASE: f64 = 2.0;
+/// Paper base weight of ℓ_mob.
+pub const W_MOB_BASE: f64 = 2.0;
+/// Paper n_g.
+pub const DEFAULT_GUIDED_STEPS: usize = 500;
+/// Paper τ.
+pub const DEFAULT_TAU: f64 = 1000.0;
+/// Most observed points accepted.
+pub const MAX_POINTS: usize = 100_000;
+/// Largest accepted weight (beyond this a step is a jump, not guidance).
+pub const MAX_WEIGHT: f64 = 1e6;
+/// Largest accepted |coordinate| of an observed point (metres).
+pub const MAX_COORD: f32 = 1e3;
+
+/// Which loss terms are on (for the paper's weight rule).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Terms {
+    /// ℓ_pc.
+    pub pc: bool,
+    /// ℓ_pen.
+    pub pen: bool,
+    /// ℓ_mob.
+    pub mob: bool,
+}
+
+impl Terms {
+    /// All three.
+    pub const ALL: Terms = Terms {
+        pc: true,
+        pen: true,
+        mob: true,
+    };
+}
+
+/// Guidance settings of one job.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GuidanceOptions {
+    /// Observed partial point cloud (object frame, metres); needed when `w_pc > 0`.
+    pub points: Vec<[f32; 3]>,
+    /// Weight of ℓ_pc.
+    pub w_pc: f64,
+    /// Weight of ℓ_pen.
+    pub w_pen: f64,
+    /// Weight of ℓ_mob.
+    pub w_mob: f64,
+    /// n_g: guide the last this many steps (t < n_g).
+    pub steps: usize,
+    /// τ of the soft assignment in ℓ_pc.
+    pub tau: f64,
+    /// Clamp every entry of ∇_{x_t} ℓ to ±this (model space) before subtracting it. A
+    /// deviation from the paper (which subtracts the raw gradient, §9 A11), off (None) by
+    /// default; with it, the runaway-gradient check only rejects non-finite gradients.
+    pub max_step: Option<f64>,
+}
+
+impl Default for GuidanceOptions {
+    /// The paper's pc+pen+mob weights, n_g and τ, with no points (set them).
+    fn default() -> Self {
+        GuidanceOptions::paper(Vec::new(), Terms::ALL)
+    }
+}
+
+impl GuidanceOptions {
+    /// The paper's settings for `terms`: base weights ÷ number of active terms.
+    pub fn paper(points: Vec<[f32; 3]>, terms: Terms) -> Self {
+        let n = [terms.pc, terms.pen, terms.mob]
+            .iter()
+            .filter(|t| **t)
+            .count()
+            .max(1) as f64;
+        let on = |t: bool, w: f64| if t { w / n } else { 0.0 };
+        GuidanceOptions {
+            points,
+            w_pc: on(terms.pc, W_PC_BASE),
+            w_pen: on(terms.pen, W_PEN_BASE),
+            w_mob: on(terms.mob, W_MOB_BASE),
+            steps: DEFAULT_GUIDED_STEPS,
+            tau: DEFAULT_TAU,
+            max_step: None,
+        }
+    }
+
+    /// Check every field against its limit; `total_steps` is the sampler's T.
+    pub fn validate(&self, total_steps: usize) -> Result<(), EngineError> {
+        let bad = |field: &str, limit: String, value: String| {
+            Err(EngineError::Invalid {
+                field: format!("guidance.{field}"),
+                limit,
+                value,
+            })
+        };
+        for (name, w) in [
+            ("w_pc", self.w_pc),
+            ("w_pen", self.w_pen),
+            ("w_mob", self.w_mob),
+        ] {
+            if !(w.is_finite() && (0.0..=MAX_WEIGHT).contains(&w)) {
+                return bad(name, format!("finite, in [0, {MAX_WEIGHT}]"), w.to_string());
+            }
+        }
+        if !(self.tau.is_finite() && self.tau > 0.0 && self.tau <= 1e9) {
+            return bad("tau", "finite, in (0, 1e9]".into(), self.tau.to_string());
+        }
+        if let Some(c) = self.max_step
+            && !(c.is_finite() && c > 0.0)
+        {
+            return bad("max_step", "finite and > 0".into(), c.to_string());
+        }
+        if self.steps > total_steps {
+            return bad(
+                "steps",
+                format!("at most the {total_steps} sampler steps"),
+                self.steps.to_string(),
+            );
+        }
+        if self.w_pc > 0.0 && self.points.is_empty() {
+            return bad(
+                "points",
+                "at least 1 point when w_pc > 0".into(),
+                "0 points".into(),
+            );
+        }
+        if self.points.len() > MAX_POINTS {
+            return bad(
+                "points",
+                format!("at most {MAX_POINTS} points"),
+                format!("{} points", self.points.len()),
+            );
+        }
+        if let Some((j, p)) = self
+            .points
+            .iter()
+            .enumerate()
+            .find(|(_, p)| p.iter().any(|v| !(v.is_finite() && v.abs() <= MAX_COORD)))
+        {
+            return bad(
+                &format!("points[{j}]"),
+                format!("finite, |coordinate| ≤ {MAX_COORD}"),
+                format!("{p:?}"),
+            );
+        }
+        Ok(())
+    }
+
+    /// Whether any term has a positive weight.
+    pub fn is_active(&self) -> bool {
+        self.w_pc > 0.0 || self.w_pen > 0.0 || self.w_mob > 0.0
+    }
+}
+
+/// Loss values of one guided step, summed over the batch (unweighted terms).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct GuidanceLosses {
+    /// ℓ_pc.
+    pub pc: f64,
+    /// ℓ_pen.
+    pub pen: f64,
+    /// ℓ_mob.
+    pub mob: f64,
+    /// w_pc ℓ_pc + w_pen ℓ_pen + w_mob ℓ_mob.
+    pub total: f64,
+    /// max |∇_{x_t} ℓ| subtracted this step (model space).
+    pub grad_max: f64,
+}
+
+/// Host copies of the decoded part boxes, used to plan grids and skip pairs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HostParts {
+    /// õ clamped to [0, 1].
+    pub exist: Vec<f32>,
+    /// max(|b|, 1e-4).
+    pub boxes: Vec<[f32; 3]>,
+    /// t.
+    pub centres: Vec<[f32; 3]>,
+}
+
+/// One decoded graph: tensors for the losses and host values for planning.
+#[derive(Debug, Clone)]
+pub struct Decoded {
+    /// Boxes, centres, codes.
+    pub parts: PartTensors,
+    /// Raw existences õ [K] (clamped where used).
+    pub exist: Tensor<1>,
+    /// Raw edges [28, 13].
+    pub edges: Tensor<2>,
+    /// Host copies.
+    pub host: HostParts,
+    /// Edge classes c̃ (raw) per row.
+    pub classes: Vec<[f32; 3]>,
+}
+
+fn host_rows<const N: usize>(t: Tensor<2>) -> Vec<[f32; N]> {
+    let v: Vec<f32> = t.into_data().try_to_vec::<f32>().unwrap_or_default();
+    v.chunks(N).map(|c| std::array::from_fn(|k| c[k])).collect()
+}
+
+/// Decode one raw (unscaled) graph: `nodes` [K, 135], `edges` [28, 13].
+pub fn decode(nodes: Tensor<2>, edges: Tensor<2>, latent: usize) -> Decoded {
+    let exist = nodes.clone().narrow(1, node_ch::EXIST, 1).reshape([K]);
+    let parts = PartTensors::new(
+        nodes.clone().narrow(1, node_ch::BOX, 3),
+        nodes.clone().narrow(1, node_ch::CENTER, 3),
+        nodes.narrow(1, node_ch::LATENT, latent),
+    );
+    let exist_host: Vec<f32> = exist
+        .clone()
+        .into_data()
+        .try_to_vec::<f32>()
+        .unwrap_or_default()
+        .into_iter()
+        .map(|o| if o.is_nan() { 0.0 } else { o.clamp(0.0, 1.0) })
+        .collect();
+    let host = HostParts {
+        exist: exist_host,
+        boxes: host_rows::<3>(parts.boxes.clone()),
+        centres: host_rows::<3>(parts.centres.clone()),
+    };
+    let classes = host_rows::<3>(edges.clone().narrow(1, edge_ch::CLASS, 3));
+    Decoded {
+        parts,
+        exist,
+        edges,
+        host,
+        classes,
+    }
+}
+
+/// ℓ of a batch of raw x̂₀ (`nodes` [B, K, 135], `edges` [B, 28, 13]) and the unweighted term
+/// values; the tensor is None when no term has anything to penalise (zero loss, zero gradient).
+/// `rng` draws the mobility states.
+pub fn guidance_loss(
+    field: &dyn SdfField,
+    opts: &GuidanceOptions,
+    nodes: Tensor<3>,
+    edges: Tensor<3>,
+    rng: &mut Rng,
+) -> (Option<Tensor<1>>, GuidanceLosses) {
+    let b = nodes.dims()[0];
+    let latent = field.latent();
+    let mut total: Option<Tensor<1>> = None;
+    let mut values = GuidanceLosses::default();
+    let add = |t: Tensor<1>, w: f64, slot: &mut f64, total: &mut Option<Tensor<1>>| {
+        let v = t.clone().into_scalar::<f32>() as f64;
+        *slot += v;
+        let t = t * w as f32;
+        *total = Some(match total.take() {
+            Some(s) => s + t,
+            None => t,
+        });
+    };
+    for s in 0..b {
+        let n = nodes.clone().narrow(0, s, 1).reshape([K, NODE_DIM]);
+        let e = edges.clone().narrow(0, s, 1).reshape([NUM_EDGES, EDGE_DIM]);
+        let d = decode(n, e, latent);
+        if opts.w_pc > 0.0 {
+            let l = pc::loss(
+                field,
+                &d.parts,
+                d.exist.clone(),
+                &opts.points,
+                opts.tau as f32,
+            );
+            add(l, opts.w_pc, &mut values.pc, &mut total);
+        }
+        if opts.w_pen > 0.0
+            && let Some(l) = pen::loss(field, &d.parts, d.exist.clone(), &d.host)
+        {
+            add(l, opts.w_pen, &mut values.pen, &mut total);
+        }
+        if opts.w_mob > 0.0 {
+            let items = mob::loss_items(&d.classes, rng);
+            let w = mob::loss_weights(d.edges.clone(), &items);
+            if let Some(l) = mob::sweep(field, &d.parts, d.edges.clone(), &items, w) {
+                add(l, opts.w_mob, &mut values.mob, &mut total);
+            }
+        }
+    }
+    values.total = opts.w_pc * values.pc + opts.w_pen * values.pen + opts.w_mob * values.mob;
+    (total, values)
+}
+
+#[cfg(test)]
+mod tests;

@@ -404,7 +404,11 @@ pub fn validate(
     }
     let tau = input.tau.unwrap_or(DEFAULT_TAU);
     if !(tau.is_finite() && tau > 0.0 && tau <= MAX_TAU) {
-        return Err(violation("tau", format!("finite, > 0 and <= {MAX_TAU}"), tau));
+        return Err(violation(
+            "tau",
+            format!("finite, > 0 and <= {MAX_TAU}"),
+            tau,
+        ));
     }
     if let Some(c) = input.guidance_max_step
         && !(c.is_finite() && c > 0.0)
@@ -515,7 +519,11 @@ mod tests {
             w_mob: Some(0.0),
             ..Default::default()
         };
-        assert!(!validate(&input, &caps(), &Limits::default(), 0).unwrap().guided());
+        assert!(
+            !validate(&input, &caps(), &Limits::default(), 0)
+                .unwrap()
+                .guided()
+        );
     }
 
     #[test]
@@ -597,7 +605,10 @@ mod tests {
             assert!(v.limit.contains("> 0"), "{v}");
         }
         let v = bad(&|i| i.sampler = Some("euler".into()));
-        assert_eq!((v.field.as_str(), v.value.as_str()), ("sampler", "\"euler\""));
+        assert_eq!(
+            (v.field.as_str(), v.value.as_str()),
+            ("sampler", "\"euler\"")
+        );
         assert!(v.limit.contains("ddim"), "{v}");
         let v = bad(&|i| i.eta = Some(0.5));
         assert_eq!(v.field, "eta");

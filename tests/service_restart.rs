@@ -137,7 +137,7 @@ async fn kill_9_mid_run_then_restart_finishes_once_with_same_bytes() {
         "{states:?}"
     );
     assert_eq!(events.iter().filter(|e| e.event == "done").count(), 1);
-    assert_eq!(events.iter().filter(|e| e.event == "artifact").count(), 3);
+    assert_eq!(events.iter().filter(|e| e.event == "artifact").count(), 4);
 
     // An uninterrupted run of the same request gives the same bytes.
     let r = c

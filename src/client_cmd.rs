@@ -50,6 +50,34 @@ pub struct SubmitArgs {
     /// Job deadline in seconds.
     #[arg(long, env = "PHYSNAP_DEADLINE")]
     deadline: Option<f64>,
+    /// Point-cloud loss weight (server default: 45 ÷ active terms; all weights 0 = unguided).
+    #[arg(long, env = "PHYSNAP_W_PC")]
+    w_pc: Option<f64>,
+    /// Penetration loss weight (server default: 2 ÷ active terms; 0 turns it off).
+    #[arg(long, env = "PHYSNAP_W_PEN")]
+    w_pen: Option<f64>,
+    /// Mobility loss weight (server default: 2 ÷ active terms; 0 turns it off).
+    #[arg(long, env = "PHYSNAP_W_MOB")]
+    w_mob: Option<f64>,
+    /// n_g: how many of the final reverse steps are guided (server default: 500 of 1000,
+    /// scaled to --steps).
+    #[arg(long, env = "PHYSNAP_N_G")]
+    n_g: Option<u32>,
+    /// Temperature τ of the point-to-part soft assignment (server default 1000).
+    #[arg(long, env = "PHYSNAP_TAU")]
+    tau: Option<f64>,
+    /// Clamp each guidance-gradient entry to ±this (a deviation from the paper; off by default).
+    #[arg(long, env = "PHYSNAP_GUIDANCE_MAX_STEP")]
+    guidance_max_step: Option<f64>,
+    /// Reverse-step rule: ddpm (server default) or ddim.
+    #[arg(long, env = "PHYSNAP_SAMPLER", value_parser = ["ddpm", "ddim"])]
+    sampler: Option<String>,
+    /// DDIM noise level η in [0, 1] (ddim only).
+    #[arg(long, env = "PHYSNAP_DDIM_ETA")]
+    eta: Option<f64>,
+    /// Reverse steps, 1-1000 (server default 1000).
+    #[arg(long, env = "PHYSNAP_STEPS")]
+    steps: Option<u32>,
     /// Idempotency key (a retry with the same key returns the same job).
     #[arg(long, env = "PHYSNAP_REQUEST_ID", default_value = "")]
     request_id: String,
@@ -117,6 +145,15 @@ pub fn submit(a: SubmitArgs) -> anyhow::Result<()> {
             samples: a.samples,
             resolution: a.resolution,
             deadline_seconds: a.deadline,
+            w_pc: a.w_pc,
+            w_pen: a.w_pen,
+            w_mob: a.w_mob,
+            n_g: a.n_g,
+            tau: a.tau,
+            guidance_max_step: a.guidance_max_step,
+            sampler: a.sampler.clone().unwrap_or_default(),
+            eta: a.eta,
+            steps: a.steps,
             ..Default::default()
         };
         let job = cl

@@ -84,7 +84,10 @@ async fn rest_sse_and_grpc_through_caddy() {
     // REST submit + SSE through the gateway: progress arrives before the end of the job.
     let r = c
         .post(format!("{gw}/v1/jobs"))
-        .json(&json!({"points": cloud(32), "samples": 4, "resolution": 8, "seed": 2}))
+        .json(
+            &json!({"points": cloud(32), "samples": 4, "resolution": 8, "seed": 2,
+                       "w_pc": 0.0, "w_pen": 0.0, "w_mob": 0.0}),
+        )
         .send()
         .await
         .unwrap();

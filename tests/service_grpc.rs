@@ -13,7 +13,14 @@ fn spec(points: Vec<f32>) -> pb::JobSpec {
         points: Some(pb::job_spec::Points::Xyz(pb::FlatPoints { values: points })),
         category: "Laptop".into(),
         seed: Some(9),
-        preview_every: Some(500),
+        preview_every: Some(10),
+        // Guided (paper weights), few DDIM steps; the clamp keeps the untrained test
+        // weights from diverging.
+        sampler: "ddim".into(),
+        steps: Some(40),
+        n_g: Some(10),
+        tau: Some(1000.0),
+        guidance_max_step: Some(0.05),
         ..Default::default()
     }
 }
@@ -292,7 +299,16 @@ async fn cli_submit_watch_downloads_verified_artifacts() {
     let o = tokio::task::spawn_blocking(move || {
         std::process::Command::new(env!("CARGO_BIN_EXE_physnap"))
             .args(["submit", "--server", &server, "--category", "Door"])
-            .args(["--seed", "4", "--resolution", "8", "--points"])
+            .args(["--seed", "4", "--resolution", "8", "--sampler", "ddim"])
+            .args([
+                "--steps",
+                "20",
+                "--n-g",
+                "5",
+                "--guidance-max-step",
+                "0.05",
+                "--points",
+            ])
             .arg(&ply2)
             .arg("--out")
             .arg(&out2)

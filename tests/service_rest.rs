@@ -46,7 +46,8 @@ async fn submit_stream_download_validate_resume() {
         &c,
         &s.url("/v1/jobs"),
         json!({"points": points_json(64), "category": "Laptop", "seed": 5,
-               "preview_every": 250, "resolution": 16}),
+               "preview_every": 250, "resolution": 16,
+               "w_pc": 0.0, "w_pen": 0.0, "w_mob": 0.0}),
     )
     .await;
     assert_eq!(r.status(), 202);
@@ -74,7 +75,7 @@ async fn submit_stream_download_validate_resume() {
     assert_eq!(states, ["QUEUED", "RUNNING", "SUCCEEDED"]);
     assert_eq!(
         evs.iter().filter(|e| e.event == "artifact").count(),
-        3,
+        4,
         "{kinds:?}"
     );
     let progress: Vec<Value> = evs
@@ -183,7 +184,8 @@ async fn submit_stream_download_validate_resume() {
     let r = submit(
         &c,
         &s.url("/v1/jobs"),
-        json!({"points": points_json(64), "category": "Laptop", "seed": 5, "resolution": 16}),
+        json!({"points": points_json(64), "category": "Laptop", "seed": 5, "resolution": 16,
+               "w_pc": 0.0, "w_pen": 0.0, "w_mob": 0.0}),
     )
     .await;
     let j2: Value = r.json().await.unwrap();
@@ -679,7 +681,8 @@ async fn sse_resume_mid_run_loses_no_state_event() {
     let j: Value = submit(
         &c,
         &s.url("/v1/jobs"),
-        json!({"points": points_json(32), "samples": 8, "resolution": 8, "seed": 3}),
+        json!({"points": points_json(32), "samples": 8, "resolution": 8, "seed": 3,
+               "w_pc": 0.0, "w_pen": 0.0, "w_mob": 0.0}),
     )
     .await
     .json()
@@ -724,5 +727,180 @@ async fn sse_resume_mid_run_loses_no_state_event() {
     assert_eq!(seen, (1..=seen.len() as u64).collect::<Vec<_>>());
     assert_eq!(rest.last().unwrap().event, "done");
     assert_eq!(rest.last().unwrap().json()["state"], "SUCCEEDED");
+    s.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn guided_ddim_job_streams_losses_and_ranks_best_of_n() {
+    let s = start(Opts::default()).await;
+    let c = client();
+    let r = submit(
+        &c,
+        &s.url("/v1/jobs"),
+        json!({"points": points_json(64), "seed": 3, "samples": 2, "resolution": 8,
+               "sampler": "ddim", "eta": 0.0, "steps": 20, "n_g": 10, "w_pc": 15.0,
+               "tau": 1000.0, "preview_every": 1, "guidance_max_step": 0.05}),
+    )
+    .await;
+    assert_eq!(r.status(), 202);
+    let loc = r.headers()["location"].to_str().unwrap().to_string();
+    let job: Value = r.json().await.unwrap();
+    let req = &job["request"];
+    assert_eq!(req["guided"], true);
+    assert_eq!(
+        (req["n_g"].as_u64(), req["steps"].as_u64()),
+        (Some(10), Some(20))
+    );
+    assert_eq!(
+        (req["sampler"].as_str(), req["tau"].as_f64()),
+        (Some("ddim"), Some(1000.0))
+    );
+    // Unset weights follow the paper's rule: w_pen = w_mob = 2 / 3.
+    assert!(
+        (req["w_pen"].as_f64().unwrap() - 2.0 / 3.0).abs() < 1e-12,
+        "{req}"
+    );
+
+    let r = c.get(s.url(&format!("{loc}/events"))).send().await.unwrap();
+    let evs = SseReader::new(r).collect().await;
+    let done = evs.last().unwrap().json();
+    assert_eq!(done["state"], "SUCCEEDED", "{done:#}");
+    let progress: Vec<Value> = evs
+        .iter()
+        .filter(|e| e.event == "progress")
+        .map(|e| e.json())
+        .collect();
+    assert!(
+        progress.iter().all(|p| p["total_steps"] == 20),
+        "{progress:?}"
+    );
+    // The last reverse step (t = 0) is always guided with n_g >= 1, and it is a preview.
+    let guided: Vec<&Value> = progress
+        .iter()
+        .filter(|p| p.get("guidance").is_some())
+        .collect();
+    assert!(
+        !guided.is_empty(),
+        "no progress event with loss values: {progress:?}"
+    );
+    for p in &guided {
+        let g = &p["guidance"];
+        for k in ["l_pc", "l_pen", "l_mob", "total"] {
+            assert!(g[k].as_f64().is_some_and(f64::is_finite), "{k}: {g}");
+        }
+        assert!(g["l_pc"].as_f64().unwrap() > 0.0, "{g}");
+        // Only the last n_g = 10 steps are guided.
+        assert!(p["step"].as_u64().unwrap() > 10, "{p}");
+    }
+
+    // ranking.json: both samples, best first by D_pc, the exported one marked.
+    let ranking: Value = c
+        .get(s.url(&format!("{loc}/artifacts/ranking.json")))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(ranking["format"], "physnap.job_ranking/v1");
+    assert_eq!(ranking["guided"], true);
+    assert_eq!(ranking["guidance"]["n_g"], 10);
+    let rows = ranking["samples"].as_array().unwrap();
+    assert_eq!(rows.len(), 2, "{ranking:#}");
+    let d: Vec<f64> = rows.iter().map(|r| r["d_pc"].as_f64().unwrap()).collect();
+    assert!(d[0] <= d[1], "{ranking:#}");
+    assert_eq!(rows[0]["exported"], true);
+    assert_eq!(rows[0]["diverged"], false);
+    assert_eq!(ranking["best"], rows[0]["index"]);
+    let seeds: Vec<u64> = rows.iter().map(|r| r["seed"].as_u64().unwrap()).collect();
+    assert!(seeds.contains(&3) && seeds.contains(&4), "{seeds:?}");
+    let model: Value = c
+        .get(s.url(&format!("{loc}/artifacts/object.json")))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(
+        model["name"].as_str().unwrap(),
+        format!("sample_{:03}", rows[0]["index"].as_u64().unwrap())
+    );
+    s.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn guidance_and_sampler_fields_are_validated() {
+    let s = start(Opts::default()).await;
+    let c = client();
+    let cases = [
+        (json!({"steps": 20, "n_g": 21}), "n_g", "21"),
+        (json!({"n_g": 1001}), "n_g", "1001"),
+        (json!({"tau": 0.0}), "tau", "0"),
+        (json!({"tau": -3.5}), "tau", "-3.5"),
+        (json!({"sampler": "euler"}), "sampler", "\"euler\""),
+        (json!({"sampler": "ddim", "eta": 2.0}), "eta", "2"),
+        (json!({"steps": 0}), "steps", "0"),
+        (json!({"steps": 1001}), "steps", "1001"),
+        (
+            json!({"guidance_max_step": -1.0}),
+            "guidance_max_step",
+            "-1",
+        ),
+    ];
+    for (extra, field, value) in cases {
+        let mut b = json!({"points": points_json(32)});
+        for (k, v) in extra.as_object().unwrap() {
+            b[k] = v.clone();
+        }
+        let p = problem(submit(&c, &s.url("/v1/jobs"), b).await, 422).await;
+        let e = &p["errors"][0];
+        assert_eq!(
+            (e["field"].as_str(), e["value"].as_str()),
+            (Some(field), Some(value)),
+            "{p}"
+        );
+        assert!(!e["limit"].as_str().unwrap().is_empty(), "{p}");
+    }
+    // JSON has no NaN: a raw upload's query string carries one.
+    let r = c
+        .post(s.url("/v1/jobs?tau=NaN"))
+        .header("content-type", "application/octet-stream")
+        .body(f32le(&cloud(32)))
+        .send()
+        .await
+        .unwrap();
+    let p = problem(r, 422).await;
+    assert_eq!(
+        (
+            p["errors"][0]["field"].as_str(),
+            p["errors"][0]["value"].as_str()
+        ),
+        (Some("tau"), Some("NaN")),
+        "{p}"
+    );
+    s.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_job_whose_samples_all_diverge_fails_with_the_reason() {
+    let s = start(Opts::default()).await;
+    let c = client();
+    // The untrained test weights blow up under the paper's raw (unclamped) gradient.
+    let r = submit(
+        &c,
+        &s.url("/v1/jobs"),
+        json!({"points": points_json(64), "seed": 3, "samples": 2, "resolution": 8,
+               "sampler": "ddim", "steps": 20, "n_g": 10, "w_pc": 1.0e6}),
+    )
+    .await;
+    assert_eq!(r.status(), 202);
+    let loc = r.headers()["location"].to_str().unwrap().to_string();
+    let j = wait_state(&c, &s.url(&loc), &["SUCCEEDED", "FAILED"]).await;
+    assert_eq!(j["state"], "FAILED", "{j:#}");
+    assert_eq!(j["error"]["type"], "diverged", "{j:#}");
+    let detail = j["error"]["detail"].as_str().unwrap();
+    assert!(detail.contains("all 2 samples diverged"), "{detail}");
+    assert!(j["artifacts"].as_array().unwrap().is_empty(), "{j:#}");
     s.shutdown().await;
 }

@@ -84,7 +84,7 @@ async fn kill_9_mid_run_then_restart_finishes_once_with_same_bytes() {
     tiny_weights(&root.path().join("weights"));
     let c = reqwest::Client::new();
     let body = json!({"points": cloud(30), "seed": 11, "samples": 6, "resolution": 8,
-                      "category": "Door"});
+                      "category": "Door", "w_pc": 0.0, "w_pen": 0.0, "w_mob": 0.0});
 
     let server = spawn(root.path());
     let r = c
@@ -137,7 +137,7 @@ async fn kill_9_mid_run_then_restart_finishes_once_with_same_bytes() {
         "{states:?}"
     );
     assert_eq!(events.iter().filter(|e| e.event == "done").count(), 1);
-    assert_eq!(events.iter().filter(|e| e.event == "artifact").count(), 3);
+    assert_eq!(events.iter().filter(|e| e.event == "artifact").count(), 4);
 
     // An uninterrupted run of the same request gives the same bytes.
     let r = c

@@ -17,9 +17,10 @@ use super::store::{Artifact, JobRecord};
 /// A job request (`POST /v1/jobs`, `application/json`). Give the point cloud in exactly one of
 /// `points`, `points_f32le_base64`, `points_ply_base64`, `points_npy_base64`.
 ///
-/// The cloud is validated (16–100 000 finite points) and stored with the job, but the engine
-/// has no guidance yet: generation does not depend on the cloud or on `w_pc`, `w_pen`, `w_mob`,
-/// `n_g`, `tau` until point-cloud guidance lands.
+/// The cloud (16–100 000 finite points) guides the sampler (PhysNAP loss guidance: ℓ_pc, ℓ_pen,
+/// ℓ_mob with weights `w_pc`, `w_pen`, `w_mob` over the last `n_g` steps, temperature `tau`);
+/// with all three weights 0 the job samples unguided. Best-of-N samples are ranked by D_pc
+/// (mean point-to-mesh distance to the cloud) and the best one is exported.
 #[derive(Debug, Clone, Default, Deserialize, Serialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct JobRequest {
@@ -38,25 +39,34 @@ pub struct JobRequest {
     /// Category (see `/v1/categories`); absent = unconditional.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub category: Option<String>,
-    /// Point-cloud loss weight (>= 0). Stored; not applied until guidance lands.
+    /// Point-cloud loss weight ℓ_pc (>= 0). Default: the paper's 45 ÷ active terms (15).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub w_pc: Option<f64>,
-    /// Penetration loss weight (>= 0). Stored; not applied until guidance lands.
+    /// Penetration loss weight ℓ_pen (>= 0). Default: 2 ÷ active terms (2/3); 0 turns it off.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub w_pen: Option<f64>,
-    /// Mobility loss weight (>= 0). Stored; not applied until guidance lands.
+    /// Mobility loss weight ℓ_mob (>= 0). Default: 2 ÷ active terms (2/3); 0 turns it off.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub w_mob: Option<f64>,
-    /// Guidance gradient steps per diffusion step (default 1, at most 100).
+    /// n_g: how many of the final reverse steps are guided (<= steps). Default: the paper's 500
+    /// of 1000, scaled to `steps` (e.g. 10 of 20).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub n_g: Option<u32>,
-    /// Guidance applies for diffusion time t < tau (default steps / 2).
+    /// τ: temperature of the soft point-to-part correspondence in ℓ_pc (finite, > 0; default
+    /// 1000).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub tau: Option<u32>,
-    /// Sampler: `ddpm` (the only one today).
+    pub tau: Option<f64>,
+    /// Clamp each guidance-gradient entry to ±this (model space; finite, > 0). A deviation
+    /// from the paper's raw gradient; absent = off.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub guidance_max_step: Option<f64>,
+    /// Sampler: `ddpm` (default; strided ancestral with fewer steps) or `ddim`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sampler: Option<String>,
-    /// Diffusion steps; must equal the schedule (1000) for `ddpm`.
+    /// DDIM noise level η in [0, 1] (default 0); only with `sampler` `ddim`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub eta: Option<f64>,
+    /// Reverse steps, 1–1000 (default 1000, the full schedule).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub steps: Option<u32>,
     /// Seed of sample 0; absent = random, echoed in `request.seed`.
@@ -90,13 +100,17 @@ pub struct UploadParams {
     pub w_pen: Option<f64>,
     /// Mobility loss weight.
     pub w_mob: Option<f64>,
-    /// Guidance steps per diffusion step.
+    /// Guided final reverse steps (n_g).
     pub n_g: Option<u32>,
-    /// Guidance window.
-    pub tau: Option<u32>,
-    /// Sampler.
+    /// Temperature τ of ℓ_pc.
+    pub tau: Option<f64>,
+    /// Guidance-gradient clamp.
+    pub guidance_max_step: Option<f64>,
+    /// Sampler (`ddpm` or `ddim`).
     pub sampler: Option<String>,
-    /// Diffusion steps.
+    /// DDIM η.
+    pub eta: Option<f64>,
+    /// Reverse steps.
     pub steps: Option<u32>,
     /// Seed.
     pub seed: Option<u64>,
@@ -151,7 +165,9 @@ impl JobRequest {
             w_mob: self.w_mob,
             n_g: self.n_g,
             tau: self.tau,
+            guidance_max_step: self.guidance_max_step,
             sampler: self.sampler,
+            eta: self.eta,
             steps: self.steps,
             seed: self.seed,
             samples: self.samples,
@@ -173,7 +189,9 @@ impl UploadParams {
             w_mob: self.w_mob,
             n_g: self.n_g,
             tau: self.tau,
+            guidance_max_step: self.guidance_max_step,
             sampler: self.sampler,
+            eta: self.eta,
             steps: self.steps,
             seed: self.seed,
             samples: self.samples,
@@ -197,12 +215,16 @@ pub struct RequestView {
     pub w_pen: f64,
     /// Mobility loss weight.
     pub w_mob: f64,
-    /// Guidance steps per diffusion step.
+    /// Guided final reverse steps (n_g).
     pub n_g: u32,
-    /// Guidance window.
-    pub tau: u32,
+    /// Temperature τ of ℓ_pc.
+    pub tau: f64,
+    /// Guidance-gradient clamp (absent: off).
+    pub guidance_max_step: Option<f64>,
     /// Sampler.
     pub sampler: String,
+    /// DDIM η (0 for `ddpm`).
+    pub eta: f64,
     /// Diffusion steps.
     pub steps: u32,
     /// Seed of sample 0.
@@ -215,8 +237,7 @@ pub struct RequestView {
     pub preview_every: u32,
     /// Meshing resolution.
     pub resolution: u32,
-    /// Whether guidance is applied. Always false in this version: the engine has no guidance
-    /// terms yet, so the cloud and loss weights do not affect the result.
+    /// Whether guidance is applied (some weight > 0); false = plain NAP sampling.
     pub guided: bool,
 }
 
@@ -275,6 +296,22 @@ pub struct ProgressView {
     /// x̂₀ preview (every `preview_every` steps).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub preview: Option<PreviewView>,
+    /// Guidance loss values of this step (guided steps only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub guidance: Option<GuidanceLossesView>,
+}
+
+/// Loss values of one guided step (unweighted terms and the weighted total).
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct GuidanceLossesView {
+    /// ℓ_pc.
+    pub l_pc: f64,
+    /// ℓ_pen.
+    pub l_pen: f64,
+    /// ℓ_mob.
+    pub l_mob: f64,
+    /// w_pc ℓ_pc + w_pen ℓ_pen + w_mob ℓ_mob.
+    pub total: f64,
 }
 
 /// A committed artefact.
@@ -387,13 +424,13 @@ pub fn media_type(name: &str) -> &'static str {
     match name {
         "model.glb" => "model/gltf-binary",
         "robot.zip" => "application/zip",
-        "object.json" => "application/json",
+        "object.json" | "ranking.json" => "application/json",
         _ => "application/octet-stream",
     }
 }
 
 /// The artefacts a job produces.
-pub const ARTIFACT_NAMES: [&str; 3] = ["model.glb", "robot.zip", "object.json"];
+pub const ARTIFACT_NAMES: [&str; 4] = ["model.glb", "robot.zip", "object.json", "ranking.json"];
 
 /// Request echo of a spec.
 pub fn request_view(s: &JobSpec) -> RequestView {
@@ -405,14 +442,16 @@ pub fn request_view(s: &JobSpec) -> RequestView {
         w_mob: s.w_mob,
         n_g: s.n_g,
         tau: s.tau,
+        guidance_max_step: s.guidance_max_step,
         sampler: s.sampler.clone(),
+        eta: s.eta,
         steps: s.steps,
         seed: s.seed,
         samples: s.samples,
         deadline_seconds: s.deadline_seconds,
         preview_every: s.preview_every,
         resolution: s.resolution,
-        guided: false,
+        guided: s.guided(),
     }
 }
 
@@ -452,6 +491,12 @@ pub fn progress_view(p: &Progress) -> ProgressView {
         t: p.t,
         eta_seconds: p.eta_seconds,
         preview: p.preview.as_ref().map(preview_view),
+        guidance: p.guidance.map(|l| GuidanceLossesView {
+            l_pc: l.pc,
+            l_pen: l.pen,
+            l_mob: l.mob,
+            total: l.total,
+        }),
     }
 }
 

@@ -1,23 +1,33 @@
 //! The one function that turns a [`JobSpec`] into artefacts by driving the engine.
 //!
-//! Why it exists: everything engine-facing of a job lives in [`run_job`], so the guidance work
-//! (point-cloud, penetration and mobility losses, strided samplers) plugs in by editing this
-//! function only; the scheduler, store and transports never touch the engine. It runs on the
-//! caller's (the service's dedicated) rayon pool, checks the caller's stop condition at every
-//! diffusion step and between phases, and reports progress with an ETA and, every
+//! Why it exists: everything engine-facing of a job lives in [`run_job`]; the scheduler, store
+//! and transports never touch the engine. It runs on the caller's (the service's dedicated)
+//! rayon pool, checks the caller's stop condition at every reverse step and between phases,
+//! and reports progress with an ETA, the guided step's loss values and, every
 //! `preview_every` steps, a light x̂₀ preview (part boxes and joints).
 //!
-//! **Not yet guided.** The engine has no guidance terms yet, so the point cloud and the loss
-//! weights w_pc, w_pen, w_mob, n_g and τ are validated and stored but do not influence the
-//! sample: generation is unconditional on the cloud (category-conditioned when a category is
-//! given). Best-of-N therefore has nothing to rank by, and the first sample is exported.
+//! Guidance (PhysNAP, method.md §8): the job's cloud and weights become a
+//! [`GuidanceOptions`] (n_g converted from "last n_g reverse steps" to the engine's "t < n_g"
+//! by [`JobSpec::guidance_threshold`]), the trained shape decoder is the part SDF the losses
+//! query, and the spec's sampler and step count pick the engine's reverse-step rule. All
+//! weights 0 samples unguided (plain NAP).
+//!
+//! Best-of-N: each sample `i` (seed + i) runs on its own; a sample that diverges
+//! ([`EngineError::Diverged`]) is recorded and skipped, and the others are ranked by D_pc
+//! (mean point-to-mesh distance to the job's cloud, ascending; samples without a mesh last).
+//! The best is exported as `model.glb`, `robot.zip` and `object.json`; `ranking.json`
+//! (`physnap.job_ranking/v1`) lists every sample with index, seed, D_pc, whether it diverged
+//! (and why) and which one was exported. If every sample diverges the job fails with
+//! [`RunError::AllDiverged`].
 
 use std::ops::ControlFlow;
 use std::time::Instant;
 
 use crate::engine::EngineError;
-use crate::engine::generate::{GenerateRequest, generate};
-use crate::engine::schedule::Schedule;
+use crate::engine::generate::{GenerateRequest, Generated, generate_with};
+use crate::engine::guidance::{GuidanceLosses, GuidanceOptions, SdfField};
+use crate::engine::schedule::{Schedule, timesteps};
+use crate::eval::guided::d_pc;
 use crate::export::{ExportError, ExportOptions, glb, urdf, zip_bundle};
 use crate::graph::{ProjectOptions, project};
 use crate::io::manifest::LoadedModels;
@@ -111,12 +121,14 @@ pub struct Progress {
     pub eta_seconds: Option<f64>,
     /// x̂₀ preview, every `preview_every` steps.
     pub preview: Option<Preview>,
+    /// Loss values of this step (ℓ_pc, ℓ_pen, ℓ_mob, weighted total), guided steps only.
+    pub guidance: Option<GuidanceLosses>,
 }
 
 /// What a successful job produced: the artefacts' bytes, in a fixed order.
 #[derive(Debug, Clone)]
 pub struct JobOutput {
-    /// `(file name, bytes)`: `model.glb`, `robot.zip`, `object.json`.
+    /// `(file name, bytes)`: `model.glb`, `robot.zip`, `object.json`, `ranking.json`.
     pub files: Vec<(String, Vec<u8>)>,
     /// Index of the exported sample.
     pub chosen_sample: u32,
@@ -128,9 +140,19 @@ pub enum RunError {
     /// The stop condition fired (cancellation or deadline).
     #[error("stopped: {0}")]
     Stopped(String),
-    /// The engine failed (divergence, projection).
+    /// The engine failed (projection, meshing, invalid options).
     #[error("engine: {0}")]
     Engine(EngineError),
+    /// Every sample of the job diverged under guidance.
+    #[error(
+        "all {samples} samples diverged under guidance (first: {first}); lower the guidance weights (w_pc, w_pen, w_mob), n_g, or set guidance_max_step"
+    )]
+    AllDiverged {
+        /// Samples in the job.
+        samples: u32,
+        /// The first sample's divergence.
+        first: String,
+    },
     /// Export failed.
     #[error("export: {0}")]
     Export(#[from] ExportError),
@@ -142,6 +164,7 @@ impl RunError {
         match self {
             RunError::Stopped(_) => "stopped",
             RunError::Engine(e) => e.error_type(),
+            RunError::AllDiverged { .. } => "diverged",
             RunError::Export(e) => e.error_type(),
         }
     }
@@ -173,6 +196,61 @@ fn preview_of(obj: &ArticulatedObject) -> Preview {
     }
 }
 
+/// The engine's guidance of a spec (None when every weight is 0).
+pub fn guidance_of(spec: &JobSpec, schedule_steps: usize) -> Option<GuidanceOptions> {
+    spec.guided().then(|| GuidanceOptions {
+        points: spec.points.clone(),
+        w_pc: spec.w_pc,
+        w_pen: spec.w_pen,
+        w_mob: spec.w_mob,
+        steps: spec.guidance_threshold(schedule_steps),
+        tau: spec.tau,
+        max_step: spec.guidance_max_step,
+    })
+}
+
+/// One row of `ranking.json`.
+struct Ranked {
+    index: usize,
+    seed: u64,
+    d_pc: f64,
+    diverged: Option<String>,
+}
+
+fn ranking_json(spec: &JobSpec, guidance: &Option<GuidanceOptions>, rows: &[Ranked]) -> Vec<u8> {
+    let num = |v: f64| {
+        if v.is_finite() {
+            serde_json::json!(v)
+        } else {
+            serde_json::Value::Null
+        }
+    };
+    let best = rows.iter().find(|r| r.diverged.is_none()).map(|r| r.index);
+    let doc = serde_json::json!({
+        "format": "physnap.job_ranking/v1",
+        "ranked_by": "d_pc (mean point-to-mesh distance to the job's cloud, m; ascending; diverged samples last)",
+        "guided": guidance.is_some(),
+        "guidance": guidance.as_ref().map(|g| serde_json::json!({
+            "w_pc": g.w_pc, "w_pen": g.w_pen, "w_mob": g.w_mob,
+            "n_g": spec.n_g, "guided_below_t": g.steps, "tau": g.tau,
+            "max_step": g.max_step,
+        })),
+        "sampler": spec.sampler, "eta": spec.eta, "steps": spec.steps,
+        "best": best,
+        "samples": rows.iter().enumerate().map(|(rank, r)| serde_json::json!({
+            "rank": rank + 1,
+            "index": r.index,
+            "seed": r.seed,
+            "d_pc": num(r.d_pc),
+            "diverged": r.diverged.is_some(),
+            "error": r.diverged,
+            "exported": Some(r.index) == best,
+        })).collect::<Vec<_>>(),
+    });
+    // Serialising plain numbers and strings cannot fail.
+    (serde_json::to_string_pretty(&doc).unwrap_or_default() + "\n").into_bytes()
+}
+
 /// Run one job on the current rayon pool. `stop` is polled every step and between phases; when
 /// it returns a reason the run ends with [`RunError::Stopped`].
 pub fn run_job(
@@ -183,77 +261,131 @@ pub fn run_job(
 ) -> Result<JobOutput, RunError> {
     let m = &models.loaded;
     let scales = &m.manifest.feature_scales;
-    // `..Default::default()` on purpose: the guidance work adds fields to GenerateRequest, and
-    // this literal must keep compiling (and pick their defaults) until it sets them here.
-    #[allow(clippy::needless_update)]
+    let guidance = guidance_of(spec, models.schedule.len());
     let req = GenerateRequest {
         seed: spec.seed,
-        samples: spec.samples as usize,
+        samples: 1,
         category: spec.category.as_ref().map(|c| c.0),
         category_name: spec.category.as_ref().map(|c| c.1.clone()),
         meshing: MeshingOptions {
             resolution: spec.resolution as usize,
         },
         preview_every: spec.preview_every as usize,
-        ..Default::default()
+        guidance: guidance.clone(),
+        sampler: spec.engine_sampler(),
+        steps: spec.steps as usize,
     };
     let decoder = LatentSdfDecoder::new(&m.shape_prior.decoder);
     let started = Instant::now();
-    let total_all = spec.samples as usize * models.schedule.len();
-    let mut on_step = |e: &crate::engine::generate::GenerateEvent| {
-        if let Some(reason) = stop() {
-            return ControlFlow::Break(reason);
+    let per_sample = timesteps(models.schedule.len(), spec.steps as usize).len();
+    let total_all = spec.samples as usize * per_sample;
+    let mut done_samples: Vec<Generated> = Vec::new();
+    let mut diverged: Vec<(usize, u64, String)> = Vec::new();
+    for i in 0..spec.samples as usize {
+        let one = GenerateRequest {
+            seed: spec.seed.wrapping_add(i as u64),
+            ..req.clone()
+        };
+        let mut on_step = |e: &crate::engine::generate::GenerateEvent| {
+            if let Some(reason) = stop() {
+                return ControlFlow::Break(reason);
+            }
+            let done = i * e.step.total + e.step.step;
+            let eta = (done > 0).then(|| {
+                started.elapsed().as_secs_f64() / done as f64
+                    * (total_all - done.min(total_all)) as f64
+            });
+            let preview = e.step.x0_preview.as_ref().and_then(|g| {
+                let raw = g.first()?.unscaled(scales);
+                project(&raw, &ProjectOptions::default())
+                    .ok()
+                    .map(|o| preview_of(&o))
+            });
+            progress(&Progress {
+                phase: if e.step.step == e.step.total {
+                    Phase::Meshing
+                } else {
+                    Phase::Denoising
+                },
+                sample: i as u32,
+                samples: spec.samples,
+                step: e.step.step as u32,
+                total_steps: e.step.total as u32,
+                t: e.step.t as u32,
+                eta_seconds: eta,
+                preview,
+                guidance: e.step.guidance,
+            });
+            ControlFlow::Continue(())
+        };
+        let r = generate_with(
+            &m.denoiser,
+            &decoder,
+            Some(&decoder as &dyn SdfField),
+            scales,
+            &models.schedule,
+            &one,
+            &mut on_step,
+        );
+        match r {
+            Ok(mut out) if !out.is_empty() => {
+                let mut g = out.remove(0);
+                g.index = i;
+                g.object.name = format!("sample_{i:03}");
+                done_samples.push(g);
+            }
+            Ok(_) => {
+                return Err(RunError::Engine(EngineError::Invalid {
+                    field: "samples".into(),
+                    limit: "at least 1".into(),
+                    value: "0".into(),
+                }));
+            }
+            Err(EngineError::Stopped { reason, .. }) => return Err(RunError::Stopped(reason)),
+            Err(e @ EngineError::Diverged { .. }) => {
+                diverged.push((i, one.seed, e.to_string()));
+            }
+            Err(other) => return Err(RunError::Engine(other)),
         }
-        let done = e.sample * e.step.total + e.step.step;
-        let eta = (done > 0).then(|| {
-            started.elapsed().as_secs_f64() / done as f64 * (total_all - done.min(total_all)) as f64
-        });
-        let preview = e.step.x0_preview.as_ref().and_then(|g| {
-            let raw = g.first()?.unscaled(scales);
-            project(&raw, &ProjectOptions::default())
-                .ok()
-                .map(|o| preview_of(&o))
-        });
-        progress(&Progress {
-            phase: if e.step.step == e.step.total {
-                Phase::Meshing
-            } else {
-                Phase::Denoising
-            },
-            sample: e.sample as u32,
-            samples: spec.samples,
-            step: e.step.step as u32,
-            total_steps: e.step.total as u32,
-            t: e.step.t as u32,
-            eta_seconds: eta,
-            preview,
-        });
-        ControlFlow::Continue(())
-    };
-    let results = generate(
-        &m.denoiser,
-        &decoder,
-        scales,
-        &models.schedule,
-        &req,
-        &mut on_step,
-    )
-    .map_err(|e| match e {
-        EngineError::Stopped { reason, .. } => RunError::Stopped(reason),
-        other => RunError::Engine(other),
-    })?;
-    if let Some(reason) = stop() {
-        return Err(RunError::Stopped(reason));
+        if let Some(reason) = stop() {
+            return Err(RunError::Stopped(reason));
+        }
     }
-    // Best-of-N: without guidance losses there is nothing to rank by; take sample 0.
-    let chosen = results.into_iter().next().ok_or_else(|| {
-        RunError::Engine(EngineError::Invalid {
-            field: "samples".into(),
-            limit: "at least 1".into(),
-            value: "0".into(),
+    if done_samples.is_empty() {
+        return Err(RunError::AllDiverged {
+            samples: spec.samples,
+            first: diverged.first().map(|d| d.2.clone()).unwrap_or_default(),
+        });
+    }
+    // Best-of-N by D_pc (NaN, i.e. no mesh, ranks last; ties by index).
+    let mut ranked: Vec<(f64, Generated)> = done_samples
+        .into_iter()
+        .map(|g| (d_pc(&g.meshes, &spec.points), g))
+        .collect();
+    let key = |v: f64| if v.is_finite() { v } else { f64::INFINITY };
+    ranked.sort_by(|a, b| {
+        key(a.0)
+            .total_cmp(&key(b.0))
+            .then(a.1.index.cmp(&b.1.index))
+    });
+    let mut rows: Vec<Ranked> = ranked
+        .iter()
+        .map(|(d, g)| Ranked {
+            index: g.index,
+            seed: g.seed,
+            d_pc: *d,
+            diverged: None,
         })
-    })?;
-    let n = models.schedule.len() as u32;
+        .collect();
+    rows.extend(diverged.into_iter().map(|(index, seed, e)| Ranked {
+        index,
+        seed,
+        d_pc: f64::NAN,
+        diverged: Some(e),
+    }));
+    let ranking = ranking_json(spec, &guidance, &rows);
+    let chosen = ranked.swap_remove(0).1;
+    let n = per_sample as u32;
     progress(&Progress {
         phase: Phase::Exporting,
         sample: chosen.index as u32,
@@ -263,6 +395,7 @@ pub fn run_job(
         t: 0,
         eta_seconds: Some(0.0),
         preview: None,
+        guidance: None,
     });
     let opts = ExportOptions {
         meshing: req.meshing,
@@ -277,6 +410,7 @@ pub fn run_job(
             ("model.glb".into(), glb),
             ("robot.zip".into(), zip),
             ("object.json".into(), json),
+            ("ranking.json".into(), ranking),
         ],
         chosen_sample: chosen.index as u32,
     })

@@ -8,6 +8,9 @@
 //! `INVALID_ARGUMENT`).
 
 use crate::data::categories::category_index;
+use crate::engine::guidance::{DEFAULT_GUIDED_STEPS, DEFAULT_TAU, GuidanceOptions, Terms};
+use crate::engine::sample::Sampler;
+use crate::engine::schedule::timesteps;
 use crate::pointcloud::{Format, Limits as CloudLimits, PointCloud, PointCloudError};
 
 /// The raw point-cloud payload, as it arrived.
@@ -38,13 +41,17 @@ pub struct JobInput {
     pub w_pen: Option<f64>,
     /// Mobility guidance weight.
     pub w_mob: Option<f64>,
-    /// Guidance gradient steps per diffusion step.
+    /// n_g: how many of the final reverse steps are guided.
     pub n_g: Option<u32>,
-    /// Guidance is applied for diffusion time t < τ.
-    pub tau: Option<u32>,
-    /// Sampler name.
+    /// τ: temperature of the soft point-to-part correspondence in ℓ_pc.
+    pub tau: Option<f64>,
+    /// Clamp of each guidance-gradient entry (model space; off when absent).
+    pub guidance_max_step: Option<f64>,
+    /// Sampler name (`ddpm` or `ddim`).
     pub sampler: Option<String>,
-    /// Diffusion steps.
+    /// DDIM noise level η (only with `ddim`).
+    pub eta: Option<f64>,
+    /// Reverse steps.
     pub steps: Option<u32>,
     /// Seed of sample 0.
     pub seed: Option<u64>,
@@ -58,8 +65,10 @@ pub struct JobInput {
     pub resolution: Option<u32>,
 }
 
-/// The only sampler the engine has today (full 1000-step DDPM).
+/// NAP's DDPM (strided ancestral sampling when fewer steps than the schedule are asked for).
 pub const SAMPLER_DDPM: &str = "ddpm";
+/// DDIM with noise level η.
+pub const SAMPLER_DDIM: &str = "ddim";
 
 /// Limits of a job; the service's flags can tighten them.
 #[derive(Debug, Clone, PartialEq)]
@@ -70,8 +79,6 @@ pub struct Limits {
     pub max_points: usize,
     /// Largest loss weight.
     pub max_weight: f64,
-    /// Most guidance steps per diffusion step.
-    pub max_n_g: u32,
     /// Most samples (best-of-N).
     pub max_samples: u32,
     /// Longest deadline (seconds).
@@ -88,7 +95,6 @@ impl Default for Limits {
             min_points: 16,
             max_points: 100_000,
             max_weight: 1.0e6,
-            max_n_g: 100,
             max_samples: 16,
             max_deadline_seconds: 7.0 * 86_400.0,
             default_deadline_seconds: 3_600.0,
@@ -109,8 +115,9 @@ pub struct ModelCaps {
 }
 
 /// A validated job. Invariants: 16..=100k finite points (per [`Limits`]), a known category for
-/// a conditional model, finite non-negative weights, `sampler == "ddpm"`, `steps` equal to the
-/// schedule, `τ ≤ steps`, 1..=max samples, a positive finite deadline.
+/// a conditional model, finite non-negative weights, `sampler` `ddpm` or `ddim` (η ∈ [0, 1],
+/// 0 for `ddpm`), `steps` in 1..=schedule, `n_g ≤ steps`, τ finite and > 0, 1..=max samples, a
+/// positive finite deadline.
 #[derive(Debug, Clone, PartialEq)]
 pub struct JobSpec {
     /// The point cloud (object frame, metres).
@@ -123,13 +130,18 @@ pub struct JobSpec {
     pub w_pen: f64,
     /// Mobility loss weight.
     pub w_mob: f64,
-    /// Guidance gradient steps per diffusion step.
+    /// n_g: the last this many of the `steps` reverse steps are guided (see
+    /// [`JobSpec::guidance_threshold`] for the engine's diffusion-time form).
     pub n_g: u32,
-    /// Guidance applies for t < τ.
-    pub tau: u32,
-    /// Sampler name.
+    /// τ: temperature of the soft point-to-part correspondence in ℓ_pc.
+    pub tau: f64,
+    /// Clamp of each guidance-gradient entry (None: the paper's raw gradient).
+    pub guidance_max_step: Option<f64>,
+    /// Sampler name (`ddpm` or `ddim`).
     pub sampler: String,
-    /// Diffusion steps.
+    /// DDIM η (0 for `ddpm`).
+    pub eta: f64,
+    /// Reverse steps (1..=schedule).
     pub steps: u32,
     /// Seed of sample 0 (always materialised).
     pub seed: u64,
@@ -141,6 +153,38 @@ pub struct JobSpec {
     pub preview_every: u32,
     /// Marching-cubes resolution.
     pub resolution: u32,
+}
+
+/// Largest τ accepted (the engine's limit).
+pub const MAX_TAU: f64 = 1e9;
+
+impl JobSpec {
+    /// Whether any guidance weight is positive (otherwise the job samples unguided).
+    pub fn guided(&self) -> bool {
+        self.w_pc > 0.0 || self.w_pen > 0.0 || self.w_mob > 0.0
+    }
+
+    /// The engine's sampler.
+    pub fn engine_sampler(&self) -> Sampler {
+        if self.sampler == SAMPLER_DDIM {
+            Sampler::Ddim { eta: self.eta }
+        } else {
+            Sampler::Ddpm
+        }
+    }
+
+    /// n_g in the engine's form: guidance applies for diffusion time t < this. The reverse
+    /// steps visit `timesteps(schedule_steps, steps)` (descending); guiding the last `n_g` of
+    /// them means t < (the time of the n_g-th last step) + 1.
+    pub fn guidance_threshold(&self, schedule_steps: usize) -> usize {
+        let times = timesteps(schedule_steps, self.steps as usize);
+        let n = (self.n_g as usize).min(times.len());
+        if n == 0 {
+            0
+        } else {
+            times[times.len() - n] + 1
+        }
+    }
 }
 
 /// One broken rule: the field, the limit and the value.
@@ -300,39 +344,76 @@ pub fn validate(
             Some((idx, caps.categories[idx].clone()))
         }
     };
-    let w_pc = weight("w_pc", input.w_pc, limits)?;
-    let w_pen = weight("w_pen", input.w_pen, limits)?;
-    let w_mob = weight("w_mob", input.w_mob, limits)?;
-    let n_g = input.n_g.unwrap_or(1);
-    if n_g > limits.max_n_g {
-        return Err(violation("n_g", format!("<= {}", limits.max_n_g), n_g));
-    }
+    // Paper defaults (45/2/2 ÷ active terms) for the terms not switched off with a 0, the
+    // same rule as `physnap generate --points`; given weights override.
+    let terms = Terms {
+        pc: input.w_pc.is_none_or(|w| w > 0.0),
+        pen: input.w_pen.is_none_or(|w| w > 0.0),
+        mob: input.w_mob.is_none_or(|w| w > 0.0),
+    };
+    let paper = GuidanceOptions::paper(Vec::new(), terms);
+    let w_pc = weight("w_pc", input.w_pc.or(Some(paper.w_pc)), limits)?;
+    let w_pen = weight("w_pen", input.w_pen.or(Some(paper.w_pen)), limits)?;
+    let w_mob = weight("w_mob", input.w_mob.or(Some(paper.w_mob)), limits)?;
     let sampler = input
         .sampler
         .clone()
         .filter(|s| !s.is_empty())
         .unwrap_or_else(|| SAMPLER_DDPM.to_string());
-    if sampler != SAMPLER_DDPM {
+    if sampler != SAMPLER_DDPM && sampler != SAMPLER_DDIM {
         return Err(violation(
             "sampler",
-            format!("\"{SAMPLER_DDPM}\" (the only sampler of this engine)"),
+            format!("\"{SAMPLER_DDPM}\" or \"{SAMPLER_DDIM}\""),
             format!("{sampler:?}"),
         ));
     }
+    let eta = match input.eta {
+        None => 0.0,
+        Some(e) if sampler != SAMPLER_DDIM => {
+            return Err(violation(
+                "eta",
+                format!("absent unless sampler is \"{SAMPLER_DDIM}\""),
+                e,
+            ));
+        }
+        Some(e) if !(e.is_finite() && (0.0..=1.0).contains(&e)) => {
+            return Err(violation("eta", "finite, in [0, 1]", e));
+        }
+        Some(e) => e,
+    };
     let steps = input.steps.unwrap_or(caps.schedule_steps);
-    if steps != caps.schedule_steps {
+    if steps == 0 || steps > caps.schedule_steps {
         return Err(violation(
             "steps",
             format!(
-                "{} (the DDPM schedule the weights were trained with)",
+                "1..={} (the diffusion schedule the weights were trained with)",
                 caps.schedule_steps
             ),
             steps,
         ));
     }
-    let tau = input.tau.unwrap_or(steps / 2);
-    if tau > steps {
-        return Err(violation("tau", format!("<= steps ({steps})"), tau));
+    // The paper's n_g = 500 of T = 1000 steps, scaled to the steps asked for: the same share
+    // of the run as the CLI's `--guidance-steps 500` (t < 500) guides with `--steps`.
+    let n_g = input.n_g.unwrap_or_else(|| {
+        ((DEFAULT_GUIDED_STEPS as f64 * steps as f64 / caps.schedule_steps.max(1) as f64).round()
+            as u32)
+            .min(steps)
+    });
+    if n_g > steps {
+        return Err(violation("n_g", format!("<= steps ({steps})"), n_g));
+    }
+    let tau = input.tau.unwrap_or(DEFAULT_TAU);
+    if !(tau.is_finite() && tau > 0.0 && tau <= MAX_TAU) {
+        return Err(violation(
+            "tau",
+            format!("finite, > 0 and <= {MAX_TAU}"),
+            tau,
+        ));
+    }
+    if let Some(c) = input.guidance_max_step
+        && !(c.is_finite() && c > 0.0)
+    {
+        return Err(violation("guidance_max_step", "finite and > 0", c));
     }
     let samples = input.samples.unwrap_or(1);
     if samples == 0 || samples > limits.max_samples {
@@ -379,7 +460,9 @@ pub fn validate(
         w_mob,
         n_g,
         tau,
+        guidance_max_step: input.guidance_max_step,
         sampler,
+        eta,
         steps,
         seed: input.seed.unwrap_or(random_seed),
         samples,
@@ -412,8 +495,65 @@ mod tests {
             ..Default::default()
         };
         let s = validate(&input, &caps(), &Limits::default(), 77).unwrap();
-        assert_eq!((s.seed, s.samples, s.steps, s.tau), (77, 1, 1000, 500));
+        assert_eq!((s.seed, s.samples, s.steps, s.n_g), (77, 1, 1000, 500));
+        assert_eq!((s.tau, s.sampler.as_str(), s.eta), (1000.0, "ddpm", 0.0));
+        assert_eq!((s.w_pc, s.w_pen, s.w_mob), (15.0, 2.0 / 3.0, 2.0 / 3.0));
+        assert!(s.guided());
+        assert_eq!(s.guidance_threshold(1000), 500);
         assert_eq!(s.points.len(), 16);
+    }
+
+    #[test]
+    fn weight_defaults_follow_the_papers_rule_for_the_active_terms() {
+        let input = JobInput {
+            points: Some(cloud(16)),
+            w_pen: Some(0.0),
+            ..Default::default()
+        };
+        let s = validate(&input, &caps(), &Limits::default(), 0).unwrap();
+        assert_eq!((s.w_pc, s.w_pen, s.w_mob), (22.5, 0.0, 1.0));
+        let input = JobInput {
+            points: Some(cloud(16)),
+            w_pc: Some(0.0),
+            w_pen: Some(0.0),
+            w_mob: Some(0.0),
+            ..Default::default()
+        };
+        assert!(
+            !validate(&input, &caps(), &Limits::default(), 0)
+                .unwrap()
+                .guided()
+        );
+    }
+
+    #[test]
+    fn n_g_scales_with_steps_and_guides_the_last_n_g_reverse_steps() {
+        let input = JobInput {
+            points: Some(cloud(16)),
+            sampler: Some("ddim".into()),
+            eta: Some(0.5),
+            steps: Some(20),
+            ..Default::default()
+        };
+        let s = validate(&input, &caps(), &Limits::default(), 0).unwrap();
+        assert_eq!((s.steps, s.n_g), (20, 10));
+        assert_eq!(s.engine_sampler(), Sampler::Ddim { eta: 0.5 });
+        // Exactly the last n_g of the strided times fall below the threshold, and that is
+        // the CLI's `--guidance-steps 500` for the default.
+        for n_g in [0, 1, 7, 10, 20] {
+            let s = JobSpec { n_g, ..s.clone() };
+            let th = s.guidance_threshold(1000);
+            let guided = timesteps(1000, 20).into_iter().filter(|&t| t < th).count();
+            assert_eq!(guided, n_g as usize, "n_g {n_g}");
+        }
+        let cli = timesteps(1000, 20).into_iter().filter(|&t| t < 500).count();
+        assert_eq!(cli, 10);
+        let s = JobSpec {
+            n_g: 1000,
+            steps: 1000,
+            ..s
+        };
+        assert_eq!(s.guidance_threshold(1000), 1000);
     }
 
     #[test]
@@ -448,8 +588,37 @@ mod tests {
         );
         let v = bad(&|i| i.samples = Some(0));
         assert_eq!(v.field, "samples");
-        let v = bad(&|i| i.steps = Some(50));
-        assert_eq!((v.field.as_str(), v.value.as_str()), ("steps", "50"));
+        let v = bad(&|i| i.steps = Some(0));
+        assert_eq!((v.field.as_str(), v.value.as_str()), ("steps", "0"));
+        let v = bad(&|i| i.steps = Some(1001));
+        assert_eq!((v.field.as_str(), v.value.as_str()), ("steps", "1001"));
+        assert!(v.limit.contains("1..=1000"), "{v}");
+        let v = bad(&|i| {
+            i.steps = Some(20);
+            i.n_g = Some(21);
+        });
+        assert_eq!((v.field.as_str(), v.value.as_str()), ("n_g", "21"));
+        assert!(v.limit.contains("<= steps (20)"), "{v}");
+        for (tau, shown) in [(0.0, "0"), (-1.0, "-1"), (f64::NAN, "NaN")] {
+            let v = bad(&|i| i.tau = Some(tau));
+            assert_eq!((v.field.as_str(), v.value.as_str()), ("tau", shown));
+            assert!(v.limit.contains("> 0"), "{v}");
+        }
+        let v = bad(&|i| i.sampler = Some("euler".into()));
+        assert_eq!(
+            (v.field.as_str(), v.value.as_str()),
+            ("sampler", "\"euler\"")
+        );
+        assert!(v.limit.contains("ddim"), "{v}");
+        let v = bad(&|i| i.eta = Some(0.5));
+        assert_eq!(v.field, "eta");
+        let v = bad(&|i| {
+            i.sampler = Some("ddim".into());
+            i.eta = Some(1.5);
+        });
+        assert_eq!((v.field.as_str(), v.value.as_str()), ("eta", "1.5"));
+        let v = bad(&|i| i.guidance_max_step = Some(0.0));
+        assert_eq!(v.field, "guidance_max_step");
         let v = bad(&|i| i.points = Some(PointsInput::F32Le(vec![0; 13])));
         assert!(v.limit.contains("multiple of 12"));
         let v = bad(&|i| i.points = Some(PointsInput::Ply(b"ply\nformat nonsense\n".to_vec())));

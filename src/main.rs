@@ -222,6 +222,14 @@ struct GenerateArgs {
     /// Weight of the mobility loss (default with --points: 2 ÷ active terms; 0 turns it off).
     #[arg(long, env = "PHYSNAP_W_MOB")]
     w_mob: Option<f64>,
+    /// Sampler and guidance schedule.
+    #[command(flatten)]
+    sampling: SamplingArgs,
+}
+
+/// Sampler and guidance-schedule flags shared by `generate` and `eval guided`.
+#[derive(Args, Debug)]
+struct SamplingArgs {
     /// Guide the steps with diffusion time t < this (n_g).
     #[arg(long, env = "PHYSNAP_GUIDANCE_STEPS", default_value_t = physnap::engine::guidance::DEFAULT_GUIDED_STEPS)]
     guidance_steps: usize,
@@ -261,24 +269,9 @@ struct EvalGuidedArgs {
     /// Seed of the first sample.
     #[arg(long, env = "PHYSNAP_SEED", default_value_t = 0)]
     seed: u64,
-    /// Guide the steps with diffusion time t < this (n_g).
-    #[arg(long, env = "PHYSNAP_GUIDANCE_STEPS", default_value_t = physnap::engine::guidance::DEFAULT_GUIDED_STEPS)]
-    guidance_steps: usize,
-    /// Temperature τ.
-    #[arg(long, env = "PHYSNAP_TAU", default_value_t = physnap::engine::guidance::DEFAULT_TAU)]
-    tau: f64,
-    /// Clamp each guidance-gradient entry to ±this (a deviation from the paper; off by default).
-    #[arg(long, env = "PHYSNAP_GUIDANCE_MAX_STEP")]
-    guidance_max_step: Option<f64>,
-    /// Reverse-step rule: ddpm or ddim.
-    #[arg(long, env = "PHYSNAP_SAMPLER", default_value = "ddpm", value_parser = ["ddpm", "ddim"])]
-    sampler: String,
-    /// Reverse steps (0: all 1000).
-    #[arg(long, env = "PHYSNAP_STEPS", default_value_t = 0)]
-    steps: usize,
-    /// DDIM noise level η.
-    #[arg(long, env = "PHYSNAP_DDIM_ETA", default_value_t = 0.0)]
-    eta: f64,
+    /// Sampler and guidance schedule.
+    #[command(flatten)]
+    sampling: SamplingArgs,
     /// Marching-cubes grid cells per axis (for D_pc).
     #[arg(long, env = "PHYSNAP_MC_RESOLUTION", default_value_t = physnap::mesh::DEFAULT_RESOLUTION)]
     resolution: usize,

@@ -158,8 +158,10 @@ pub fn generate(a: GenerateArgs) -> anyhow::Result<()> {
         bail!("invalid --samples: 0 (must be at least 1)");
     }
     let guidance = guidance_options(&a)?;
-    let sampler = match a.sampler.as_str() {
-        "ddim" => Sampler::Ddim { eta: a.eta },
+    let sampler = match a.sampling.sampler.as_str() {
+        "ddim" => Sampler::Ddim {
+            eta: a.sampling.eta,
+        },
         _ => Sampler::Ddpm,
     };
     let req = GenerateRequest {
@@ -172,12 +174,12 @@ pub fn generate(a: GenerateArgs) -> anyhow::Result<()> {
         },
         guidance: guidance.clone(),
         sampler,
-        steps: a.steps,
+        steps: a.sampling.steps,
         ..Default::default()
     };
     req.meshing.validate()?;
     let schedule = Schedule::default();
-    let steps = physnap::engine::schedule::timesteps(schedule.len(), a.steps).len();
+    let steps = physnap::engine::schedule::timesteps(schedule.len(), a.sampling.steps).len();
     let pb = super::progress_bar(a.samples * steps, "generate");
     let decoder = LatentSdfDecoder::new(&models.shape_prior.decoder);
     let started = std::time::Instant::now();
@@ -296,9 +298,9 @@ fn guidance_options(a: &GenerateArgs) -> anyhow::Result<Option<GuidanceOptions>>
         w_pc: a.w_pc.unwrap_or(paper.w_pc),
         w_pen: a.w_pen.unwrap_or(paper.w_pen),
         w_mob: a.w_mob.unwrap_or(paper.w_mob),
-        steps: a.guidance_steps,
-        tau: a.tau,
-        max_step: a.guidance_max_step,
+        steps: a.sampling.guidance_steps,
+        tau: a.sampling.tau,
+        max_step: a.sampling.guidance_max_step,
         ..paper
     };
     opts.validate(Schedule::default().len())?;
@@ -456,14 +458,16 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         } else {
             vec![false]
         },
-        guided_steps: a.guidance_steps,
-        tau: a.tau,
-        max_step: a.guidance_max_step,
-        sampler: match a.sampler.as_str() {
-            "ddim" => Sampler::Ddim { eta: a.eta },
+        guided_steps: a.sampling.guidance_steps,
+        tau: a.sampling.tau,
+        max_step: a.sampling.guidance_max_step,
+        sampler: match a.sampling.sampler.as_str() {
+            "ddim" => Sampler::Ddim {
+                eta: a.sampling.eta,
+            },
             _ => Sampler::Ddpm,
         },
-        steps: a.steps,
+        steps: a.sampling.steps,
         meshing,
     };
     let decoder = LatentSdfDecoder::new(&models.shape_prior.decoder);
@@ -497,9 +501,9 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         "format": "physnap.guided_table/v1",
         "clouds": clouds.iter().map(|c| c.id.clone()).collect::<Vec<_>>(),
         "samples_per_cloud": a.samples_per_cloud,
-        "seed": a.seed, "guidance_steps": a.guidance_steps, "tau": a.tau,
-        "guidance_max_step": a.guidance_max_step,
-        "sampler": a.sampler, "steps": a.steps, "eta": a.eta,
+        "seed": a.seed, "guidance_steps": a.sampling.guidance_steps, "tau": a.sampling.tau,
+        "guidance_max_step": a.sampling.guidance_max_step,
+        "sampler": a.sampling.sampler, "steps": a.sampling.steps, "eta": a.sampling.eta,
         "statistic": "median over all samples",
         "rows": rows.iter().map(|r| serde_json::json!({
             "category_aware": r.category_aware, "variant": r.variant,

@@ -68,6 +68,65 @@ fn references(
         .collect()
 }
 
+/// Per-cloud references of the guided table's MMD / 1-NNA (our reading of "per point cloud",
+/// which the paper leaves open): the scanned object itself when `data` holds it, then other
+/// test-split objects of the cloud's category in a seeded order, `per_cloud` in all, each
+/// prepared for the instantiation distance. A cloud without a category gets only its own object.
+pub fn cloud_references(
+    data: &Path,
+    clouds: &[physnap::eval::guided::Cloud],
+    per_cloud: usize,
+    id: &IdOptions,
+    seed: u64,
+) -> anyhow::Result<Vec<Vec<StateClouds>>> {
+    let index_path = data.join("dataset.json");
+    let index: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(&index_path)
+            .with_context(|| format!("reading {}", index_path.display()))?,
+    )
+    .with_context(|| format!("parsing {}", index_path.display()))?;
+    let objects = index["objects"]
+        .as_array()
+        .with_context(|| format!("{}: no objects list", index_path.display()))?;
+    let entry = |o: &serde_json::Value| {
+        (
+            o["id"].as_str().unwrap_or_default().to_string(),
+            o["category_index"].as_u64().map(|c| c as usize),
+            o["split"].as_str() == Some("test"),
+        )
+    };
+    let all: Vec<(String, Option<usize>, bool)> = objects.iter().map(entry).collect();
+    let mut rng = Rng::new(seed);
+    clouds
+        .iter()
+        .map(|cloud| {
+            let mut ids: Vec<String> = Vec::new();
+            if all.iter().any(|(id, _, _)| id == &cloud.id) {
+                ids.push(cloud.id.clone());
+            }
+            if let Some(cat) = cloud.category {
+                let mut others: Vec<&String> = all
+                    .iter()
+                    .filter(|(id, c, test)| *test && *c == Some(cat) && id != &cloud.id)
+                    .map(|(id, _, _)| id)
+                    .collect();
+                for i in (1..others.len()).rev() {
+                    others.swap(i, rng.int(0, i));
+                }
+                ids.extend(others.into_iter().cloned());
+            }
+            ids.truncate(per_cloud);
+            ids.par_iter()
+                .enumerate()
+                .map(|(k, oid)| {
+                    let (obj, meshes) = load_object_meshes(&data.join("objects").join(oid))?;
+                    Ok(state_clouds(&obj, &meshes, id, seed ^ ((k as u64) << 20))?)
+                })
+                .collect()
+        })
+        .collect()
+}
+
 fn sample_set(
     models: &LoadedModels,
     category: Option<usize>,

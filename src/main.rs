@@ -278,6 +278,20 @@ struct EvalGuidedArgs {
     /// Output directory for guided_table.md / .json.
     #[arg(long, env = "PHYSNAP_OUT")]
     out: PathBuf,
+    /// Imported data set (`data import` output) holding the scanned objects and the test split:
+    /// enables the per-cloud MMD / 1-NNA columns. Without it they show "—".
+    #[arg(long, env = "PHYSNAP_DATA")]
+    data: Option<PathBuf>,
+    /// Reference objects per cloud for MMD / 1-NNA: the scanned object, then test objects of its
+    /// category (0: as many as --samples-per-cloud).
+    #[arg(long, env = "PHYSNAP_REFS_PER_CLOUD", default_value_t = 0)]
+    refs_per_cloud: usize,
+    /// Joint states per object of the instantiation distance (NAP: 10).
+    #[arg(long, env = "PHYSNAP_ID_STATES", default_value_t = 4)]
+    id_states: usize,
+    /// Surface points per state of the instantiation distance (NAP: 2048).
+    #[arg(long, env = "PHYSNAP_ID_POINTS", default_value_t = 256)]
+    id_points: usize,
 }
 
 #[derive(Subcommand, Debug)]

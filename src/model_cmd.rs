@@ -438,6 +438,7 @@ fn read_clouds(dir: &Path, max: usize) -> anyhow::Result<Vec<physnap::eval::guid
 }
 
 pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
+    use physnap::eval::generative::IdOptions;
     use physnap::eval::guided::{TableOptions, guided_table, table_markdown};
     if a.samples_per_cloud == 0 {
         bail!("invalid --samples-per-cloud: 0 (must be at least 1)");
@@ -469,6 +470,32 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         },
         steps: a.sampling.steps,
         meshing,
+        references: Vec::new(),
+        id: IdOptions {
+            states: a.id_states,
+            points: a.id_points,
+        },
+    };
+    opts.id.validate()?;
+    let per_cloud = if a.refs_per_cloud == 0 {
+        a.samples_per_cloud
+    } else {
+        a.refs_per_cloud
+    };
+    let opts = match &a.data {
+        Some(data) => {
+            eprintln!(
+                "preparing up to {per_cloud} reference objects per cloud from {}…",
+                data.display()
+            );
+            TableOptions {
+                references: super::eval_cmd::cloud_references(
+                    data, &clouds, per_cloud, &opts.id, a.seed,
+                )?,
+                ..opts
+            }
+        }
+        None => opts,
     };
     let decoder = LatentSdfDecoder::new(&models.shape_prior.decoder);
     let blocks = opts.category_aware.len();
@@ -504,11 +531,15 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         "seed": a.seed, "guidance_steps": a.sampling.guidance_steps, "tau": a.sampling.tau,
         "guidance_max_step": a.sampling.guidance_max_step,
         "sampler": a.sampling.sampler, "steps": a.sampling.steps, "eta": a.sampling.eta,
-        "statistic": "median over all samples",
+        "statistic": "E_* and D_pc: median over all samples; MMD and 1-NNA: per cloud (its samples vs its references), median over clouds",
+        "references": a.data.as_ref().map(|d| serde_json::json!({
+            "data": d.display().to_string(), "per_cloud": per_cloud,
+            "id_states": a.id_states, "id_points": a.id_points,
+        })),
         "rows": rows.iter().map(|r| serde_json::json!({
             "category_aware": r.category_aware, "variant": r.variant,
             "e_pc": num(r.e_pc), "d_pc": num(r.d_pc), "e_pen": num(r.e_pen), "e_mob": num(r.e_mob),
-            "mmd": null, "one_nna": null,
+            "mmd": num(r.mmd), "one_nna": num(r.one_nna),
             "samples": r.samples, "diverged": r.diverged, "seconds_per_sample": r.seconds_per_sample,
         })).collect::<Vec<_>>(),
     });

@@ -286,6 +286,13 @@ struct EvalGuidedArgs {
     /// category (0: as many as --samples-per-cloud).
     #[arg(long, env = "PHYSNAP_REFS_PER_CLOUD", default_value_t = 0)]
     refs_per_cloud: usize,
+    /// Rows to run: comma-separated variants among pc+pen+mob, pc+pen, pc+mob, pc, uncond
+    /// (default: all five).
+    #[arg(long, env = "PHYSNAP_VARIANTS", value_delimiter = ',')]
+    variants: Vec<String>,
+    /// Category-aware blocks: no, yes, or both (both when the weights are category-conditional).
+    #[arg(long, env = "PHYSNAP_CATEGORY_AWARE", default_value = "both", value_parser = ["no", "yes", "both"])]
+    category_aware: String,
     /// Joint states per object of the instantiation distance (NAP: 10).
     #[arg(long, env = "PHYSNAP_ID_STATES", default_value_t = 4)]
     id_states: usize,

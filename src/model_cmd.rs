@@ -454,11 +454,13 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
     let opts = TableOptions {
         samples_per_cloud: a.samples_per_cloud,
         seed: a.seed,
-        category_aware: if conditional {
-            vec![false, true]
-        } else {
-            vec![false]
+        category_aware: match a.category_aware.as_str() {
+            "no" => vec![false],
+            "yes" => vec![true],
+            _ if conditional => vec![false, true],
+            _ => vec![false],
         },
+        variants: a.variants.clone(),
         guided_steps: a.sampling.guidance_steps,
         tau: a.sampling.tau,
         max_step: a.sampling.guidance_max_step,
@@ -498,9 +500,17 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         None => opts,
     };
     let decoder = LatentSdfDecoder::new(&models.shape_prior.decoder);
+    if a.category_aware == "yes" && !conditional {
+        bail!("invalid --category-aware yes: the weights' denoiser has no category input");
+    }
     let blocks = opts.category_aware.len();
+    let variants = if a.variants.is_empty() {
+        5
+    } else {
+        a.variants.len()
+    };
     let pb = super::progress_bar(
-        blocks * 5 * clouds.len() * a.samples_per_cloud,
+        blocks * variants * clouds.len() * a.samples_per_cloud,
         "eval guided",
     );
     let rows = guided_table(
@@ -528,6 +538,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         "format": "physnap.guided_table/v1",
         "clouds": clouds.iter().map(|c| c.id.clone()).collect::<Vec<_>>(),
         "samples_per_cloud": a.samples_per_cloud,
+        "command": std::env::args().collect::<Vec<_>>().join(" "),
         "seed": a.seed, "guidance_steps": a.sampling.guidance_steps, "tau": a.sampling.tau,
         "guidance_max_step": a.sampling.guidance_max_step,
         "sampler": a.sampling.sampler, "steps": a.sampling.steps, "eta": a.sampling.eta,

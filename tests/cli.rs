@@ -239,3 +239,57 @@ fn missing_file_is_reported() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("/nonexistent/x.json"), "{}", stderr(&o));
 }
+
+#[test]
+fn eval_guided_refuses_unknown_variants_and_empty_cloud_folders() {
+    let dir = tempfile::tempdir().unwrap();
+    let clouds = dir.path().join("clouds");
+    std::fs::create_dir(&clouds).unwrap();
+    let weights = concat!(env!("CARGO_MANIFEST_DIR"), "/weights");
+    let out = dir.path().join("out").display().to_string();
+    let clouds_s = clouds.display().to_string();
+    let args = |extra: &[&'static str]| {
+        let mut a: Vec<String> = [
+            "eval",
+            "guided",
+            "--weights",
+            weights,
+            "--clouds",
+            &clouds_s,
+            "--out",
+            &out,
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+        a.extend(extra.iter().map(|s| s.to_string()));
+        a
+    };
+    let run = |a: Vec<String>| {
+        let refs: Vec<&str> = a.iter().map(String::as_str).collect();
+        physnap(&refs, &[])
+    };
+    // No clouds: the folder is named.
+    let o = run(args(&[]));
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("no point clouds"), "{}", stderr(&o));
+    // An unknown row name: the field, the allowed names and the value.
+    std::fs::copy(
+        concat!(env!("CARGO_MANIFEST_DIR"), "/examples/scan_microwave.ply"),
+        clouds.join("scan.ply"),
+    )
+    .unwrap();
+    let o = run(args(&[
+        "--variants",
+        "pc,pc+penn",
+        "--samples-per-cloud",
+        "1",
+    ]));
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(
+        e.contains("variants") && e.contains("pc+penn") && e.contains("pc+pen+mob"),
+        "{e}"
+    );
+    assert!(!dir.path().join("out/guided_table.md").exists());
+}

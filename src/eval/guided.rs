@@ -240,6 +240,8 @@ pub struct TableOptions {
     pub seed: u64,
     /// Category-aware blocks to run (false: unconditional model input; true: the cloud's category).
     pub category_aware: Vec<bool>,
+    /// Names of the [`VARIANTS`] to run, in the table's order (empty: all five).
+    pub variants: Vec<String>,
     /// Guided steps n_g.
     pub guided_steps: usize,
     /// τ.
@@ -312,11 +314,26 @@ pub fn guided_table(
         .copied()
         .filter(|&aware| !aware || clouds.iter().all(|c| c.category.is_some()))
         .collect();
-    let total = blocks.len() * VARIANTS.len() * clouds.len() * opts.samples_per_cloud;
+    let variants: Vec<Variant> = VARIANTS
+        .into_iter()
+        .filter(|v| opts.variants.is_empty() || opts.variants.iter().any(|n| n == v.name))
+        .collect();
+    if let Some(unknown) = opts
+        .variants
+        .iter()
+        .find(|n| !VARIANTS.iter().any(|v| &v.name == n))
+    {
+        return Err(EngineError::Invalid {
+            field: "variants".into(),
+            limit: format!("names among {}", VARIANTS.map(|v| v.name).join(", ")),
+            value: unknown.clone(),
+        });
+    }
+    let total = blocks.len() * variants.len() * clouds.len() * opts.samples_per_cloud;
     let mut done = 0;
     let mut rows = Vec::new();
     for &aware in &blocks {
-        for variant in VARIANTS {
+        for &variant in &variants {
             let started = std::time::Instant::now();
             let mut values: [Vec<f64>; 4] = Default::default();
             let mut per_cloud: [Vec<f64>; 2] = Default::default();
@@ -553,6 +570,7 @@ mod tests {
             samples_per_cloud: 1,
             seed: 0,
             category_aware: vec![false, true],
+            variants: Vec::new(),
             guided_steps: 1000,
             tau: 1000.0,
             max_step: Some(0.05),
@@ -601,12 +619,44 @@ mod tests {
             &anon,
             &TableOptions {
                 category_aware: vec![true],
-                ..opts
+                ..opts.clone()
             },
             &mut |_, _| {},
         )
         .unwrap();
         assert!(rows.is_empty());
+        // A subset of the variants, in the table's order; an unknown name is refused.
+        let rows = guided_table(
+            &denoiser,
+            &decoder,
+            &FeatureScales::default(),
+            &Schedule::default(),
+            &clouds,
+            &TableOptions {
+                category_aware: vec![false],
+                variants: vec!["uncond".into(), "pc".into()],
+                ..opts.clone()
+            },
+            &mut |_, _| {},
+        )
+        .unwrap();
+        let names: Vec<&str> = rows.iter().map(|r| r.variant).collect();
+        assert_eq!(names, ["pc", "uncond"]);
+        let err = guided_table(
+            &denoiser,
+            &decoder,
+            &FeatureScales::default(),
+            &Schedule::default(),
+            &clouds,
+            &TableOptions {
+                variants: vec!["pc+penn".into()],
+                ..opts
+            },
+            &mut |_, _| {},
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains("variants") && err.contains("pc+penn"), "{err}");
     }
 
     #[test]

@@ -26,6 +26,17 @@ use physnap::model::shape_prior::LatentSdfDecoder;
 
 use super::EvalGenerativeArgs;
 
+/// The imported data set's `dataset.json`, with its path for error messages.
+fn read_index(data: &Path) -> anyhow::Result<(std::path::PathBuf, serde_json::Value)> {
+    let index_path = data.join("dataset.json");
+    let index = serde_json::from_str(
+        &std::fs::read_to_string(&index_path)
+            .with_context(|| format!("reading {}", index_path.display()))?,
+    )
+    .with_context(|| format!("parsing {}", index_path.display()))?;
+    Ok((index_path, index))
+}
+
 /// Reference objects: `n` test-split objects (seeded choice), with their category names.
 fn references(
     data: &Path,
@@ -38,12 +49,7 @@ fn references(
         Vec<physnap::mesh::TriMesh>,
     )>,
 > {
-    let index_path = data.join("dataset.json");
-    let index: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(&index_path)
-            .with_context(|| format!("reading {}", index_path.display()))?,
-    )
-    .with_context(|| format!("parsing {}", index_path.display()))?;
+    let (index_path, index) = read_index(data)?;
     let mut ids: Vec<String> = index["splits"]["test"]
         .as_array()
         .with_context(|| format!("{}: no test split", index_path.display()))?
@@ -79,12 +85,7 @@ pub fn cloud_references(
     id: &IdOptions,
     seed: u64,
 ) -> anyhow::Result<Vec<Vec<StateClouds>>> {
-    let index_path = data.join("dataset.json");
-    let index: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(&index_path)
-            .with_context(|| format!("reading {}", index_path.display()))?,
-    )
-    .with_context(|| format!("parsing {}", index_path.display()))?;
+    let (index_path, index) = read_index(data)?;
     let objects = index["objects"]
         .as_array()
         .with_context(|| format!("{}: no objects list", index_path.display()))?;

@@ -184,6 +184,15 @@ struct DiffusionArgs {
     /// Steps between checkpoints.
     #[arg(long, env = "PHYSNAP_CHECKPOINT_EVERY", default_value_t = 1000)]
     checkpoint_every: usize,
+    /// Step from which the learning rate decays (cosine) to lr × --lr-final-factor.
+    #[arg(long, env = "PHYSNAP_DIFFUSION_LR_DECAY_START", default_value_t = 0)]
+    lr_decay_start: usize,
+    /// Final learning rate as a fraction of --lr (1 = constant).
+    #[arg(long, env = "PHYSNAP_DIFFUSION_LR_FINAL_FACTOR", default_value_t = 0.1)]
+    lr_final_factor: f64,
+    /// Decay of the weight EMA that is shipped as denoiser.safetensors (0 = no EMA).
+    #[arg(long, env = "PHYSNAP_DIFFUSION_EMA_DECAY", default_value_t = 0.999)]
+    ema_decay: f64,
     /// Continue from the checkpoint in --out.
     #[arg(long, env = "PHYSNAP_RESUME")]
     resume: bool,
@@ -237,9 +246,9 @@ struct SamplingArgs {
     #[arg(long, env = "PHYSNAP_TAU", default_value_t = physnap::engine::guidance::DEFAULT_TAU)]
     tau: f64,
     /// Clamp each guidance-gradient entry to ±this (model space); a deviation from the paper's
-    /// raw gradient, off by default.
-    #[arg(long, env = "PHYSNAP_GUIDANCE_MAX_STEP")]
-    guidance_max_step: Option<f64>,
+    /// raw gradient, which diverges with the shipped weights. 0: off (the paper's raw step).
+    #[arg(long, env = "PHYSNAP_GUIDANCE_MAX_STEP", default_value_t = physnap::engine::guidance::DEFAULT_MAX_STEP)]
+    guidance_max_step: f64,
     /// Reverse-step rule: ddpm (NAP; strided ancestral with --steps) or ddim.
     #[arg(long, env = "PHYSNAP_SAMPLER", default_value = "ddpm", value_parser = ["ddpm", "ddim"])]
     sampler: String,
@@ -439,6 +448,12 @@ struct ExportArgs {
 }
 
 /// A progress bar on stderr (hidden when stderr is not a terminal).
+/// `--guidance-max-step` to the engine's option: 0 turns the clamp off (the paper's raw step);
+/// other values, negative ones included, go to the engine, which validates them.
+fn max_step(flag: f64) -> Option<f64> {
+    (flag != 0.0).then_some(flag)
+}
+
 fn progress_bar(total: usize, what: &str) -> indicatif::ProgressBar {
     let pb = indicatif::ProgressBar::new(total as u64);
     pb.set_style(

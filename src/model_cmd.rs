@@ -72,6 +72,9 @@ pub fn diffusion(a: DiffusionArgs) -> anyhow::Result<()> {
         lr: a.lr,
         seed: a.seed,
         checkpoint_every: a.checkpoint_every,
+        lr_decay_start: a.lr_decay_start,
+        lr_final_factor: a.lr_final_factor,
+        ema_decay: a.ema_decay,
         ..DiffusionTrainConfig::default()
     };
     let pb = super::progress_bar(cfg.steps, "diffusion");
@@ -300,7 +303,7 @@ fn guidance_options(a: &GenerateArgs) -> anyhow::Result<Option<GuidanceOptions>>
         w_mob: a.w_mob.unwrap_or(paper.w_mob),
         steps: a.sampling.guidance_steps,
         tau: a.sampling.tau,
-        max_step: a.sampling.guidance_max_step,
+        max_step: super::max_step(a.sampling.guidance_max_step),
         ..paper
     };
     opts.validate(Schedule::default().len())?;
@@ -463,7 +466,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         variants: a.variants.clone(),
         guided_steps: a.sampling.guidance_steps,
         tau: a.sampling.tau,
-        max_step: a.sampling.guidance_max_step,
+        max_step: super::max_step(a.sampling.guidance_max_step),
         sampler: match a.sampling.sampler.as_str() {
             "ddim" => Sampler::Ddim {
                 eta: a.sampling.eta,
@@ -540,7 +543,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         "samples_per_cloud": a.samples_per_cloud,
         "command": std::env::args().collect::<Vec<_>>().join(" "),
         "seed": a.seed, "guidance_steps": a.sampling.guidance_steps, "tau": a.sampling.tau,
-        "guidance_max_step": a.sampling.guidance_max_step,
+        "guidance_max_step": super::max_step(a.sampling.guidance_max_step),
         "sampler": a.sampling.sampler, "steps": a.sampling.steps, "eta": a.sampling.eta,
         "statistic": "E_* and D_pc: median over all samples; MMD and 1-NNA: per cloud (its samples vs its references), median over clouds",
         "references": a.data.as_ref().map(|d| serde_json::json!({
@@ -550,6 +553,8 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         "rows": rows.iter().map(|r| serde_json::json!({
             "category_aware": r.category_aware, "variant": r.variant,
             "e_pc": num(r.e_pc), "d_pc": num(r.d_pc), "e_pen": num(r.e_pen), "e_mob": num(r.e_mob),
+            "e_pen_mean": num(r.e_pen_mean), "e_mob_mean": num(r.e_mob_mean),
+            "pen_share": num(r.pen_share), "mob_share": num(r.mob_share),
             "mmd": num(r.mmd), "one_nna": num(r.one_nna),
             "samples": r.samples, "diverged": r.diverged, "seconds_per_sample": r.seconds_per_sample,
         })).collect::<Vec<_>>(),

@@ -886,12 +886,14 @@ async fn guidance_and_sampler_fields_are_validated() {
 async fn a_job_whose_samples_all_diverge_fails_with_the_reason() {
     let s = start(Opts::default()).await;
     let c = client();
-    // The untrained test weights blow up under the paper's raw (unclamped) gradient.
+    // The untrained test weights blow up under the paper's raw (unclamped) gradient, which a
+    // job asks for with guidance_max_step = 0 (the default clamps).
     let r = submit(
         &c,
         &s.url("/v1/jobs"),
         json!({"points": points_json(64), "seed": 3, "samples": 2, "resolution": 8,
-               "sampler": "ddim", "steps": 20, "n_g": 10, "w_pc": 1.0e6}),
+               "sampler": "ddim", "steps": 20, "n_g": 10, "w_pc": 1.0e6,
+               "guidance_max_step": 0.0}),
     )
     .await;
     assert_eq!(r.status(), 202);

@@ -584,6 +584,7 @@ mod tests {
             guidance: Some(GuidanceOptions {
                 w_pc: 1e6,
                 steps: 10,
+                max_step: None, // the paper's raw step: the runaway check applies
                 ..GuidanceOptions::paper(cloud(), super::super::guidance::Terms::ALL)
             }),
             steps: 20,

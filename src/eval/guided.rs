@@ -14,6 +14,8 @@
 //! are "per point cloud" (paper §4, method.md §8.8): for every cloud, its generated samples
 //! against that cloud's reference objects ([`TableOptions::references`]), with the instantiation
 //! distance of §7.1 and the PointFlow set order; the row reports the median over the clouds.
+//! Beyond the paper, each row also carries the mean E_pen / E_mob and the share of samples in
+//! which they are non-zero: with a prior whose samples rarely overlap, every median is 0.
 //!
 //! Choices (§9 A9): the tree joints and the mean over states as recommended; the factor 2 of
 //! ℓ_mob is kept so E_mob and E_pen count pairs alike. All SDF queries go through the same
@@ -277,6 +279,16 @@ pub struct TableRow {
     pub e_pen: f64,
     /// Median E_mob.
     pub e_mob: f64,
+    /// Mean E_pen. Medians hide rare overlaps: when most samples do not overlap at all, the
+    /// median is 0 in every row, and only the mean and the share below can show what the
+    /// penetration term changes.
+    pub e_pen_mean: f64,
+    /// Mean E_mob.
+    pub e_mob_mean: f64,
+    /// Share of samples with E_pen > 0 (parts overlapping at rest).
+    pub pen_share: f64,
+    /// Share of samples with E_mob > 0 (parts colliding when moved).
+    pub mob_share: f64,
     /// Median over clouds of the per-cloud MMD (NaN without references).
     pub mmd: f64,
     /// Median over clouds of the per-cloud 1-NNA (NaN without references).
@@ -404,6 +416,10 @@ pub fn guided_table(
                 d_pc: median(&values[1]),
                 e_pen: median(&values[2]),
                 e_mob: median(&values[3]),
+                e_pen_mean: mean(&values[2]),
+                e_mob_mean: mean(&values[3]),
+                pen_share: positive_share(&values[2]),
+                mob_share: positive_share(&values[3]),
                 mmd: median(&per_cloud[0]),
                 one_nna: median(&per_cloud[1]),
                 samples: n,
@@ -437,14 +453,36 @@ pub fn cloud_metrics(
         })
 }
 
-/// The table as Markdown in the paper's layout ("—" where a metric could not be computed).
+/// Mean of the finite values (NaN when there are none).
+pub fn mean(values: &[f64]) -> f64 {
+    let v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        f64::NAN
+    } else {
+        v.iter().sum::<f64>() / v.len() as f64
+    }
+}
+
+/// Share of the finite values that are > 0 (NaN when there are none).
+pub fn positive_share(values: &[f64]) -> f64 {
+    let v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        f64::NAN
+    } else {
+        v.iter().filter(|&&x| x > 0.0).count() as f64 / v.len() as f64
+    }
+}
+
+/// The table as Markdown in the paper's layout ("—" where a metric could not be computed),
+/// followed by physnap's extra columns: means of E_pen / E_mob and the share of samples in
+/// which they are non-zero.
 pub fn table_markdown(rows: &[TableRow]) -> String {
     let mut s = String::from(
-        "| category | variant | E_pc | D_pc | E_pen | E_mob | MMD | 1-NNA | samples | diverged | s/sample |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| category | variant | E_pc | D_pc | E_pen | E_mob | MMD | 1-NNA | samples | diverged | s/sample | E_pen mean | E_mob mean | E_pen > 0 | E_mob > 0 |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         s.push_str(&format!(
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} |\n",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {} | {} | {} | {} |\n",
             if r.category_aware { "yes" } else { "no" },
             r.variant,
             cell(r.e_pc),
@@ -455,10 +493,23 @@ pub fn table_markdown(rows: &[TableRow]) -> String {
             cell(r.one_nna),
             r.samples,
             r.diverged,
-            r.seconds_per_sample
+            r.seconds_per_sample,
+            cell(r.e_pen_mean),
+            cell(r.e_mob_mean),
+            percent(r.pen_share),
+            percent(r.mob_share),
         ));
     }
     s
+}
+
+/// A share as a whole percentage, "—" when it is not finite.
+fn percent(v: f64) -> String {
+    if v.is_finite() {
+        format!("{:.0} %", 100.0 * v)
+    } else {
+        "—".into()
+    }
 }
 
 /// A metric with four decimals, "—" when it is not finite.
@@ -531,6 +582,12 @@ mod tests {
         assert!(d_pc(&[], &pts).is_nan());
         assert_eq!(median(&[3.0, f64::NAN, 1.0, 2.0]), 2.0);
         assert_eq!(median(&[4.0, 1.0, 2.0, 3.0]), 2.5);
+        // Mean and share see the rare overlaps a median of 0 hides.
+        let pen = [0.0, 0.0, 0.0, 8.0, f64::NAN];
+        assert_eq!(median(&pen), 0.0);
+        assert_eq!(mean(&pen), 2.0);
+        assert_eq!(positive_share(&pen), 0.25);
+        assert!(mean(&[]).is_nan() && positive_share(&[f64::NAN]).is_nan());
     }
 
     #[test]
@@ -606,6 +663,7 @@ mod tests {
         let md = table_markdown(&rows);
         assert_eq!(md.lines().count(), 12);
         assert!(md.contains("| yes | pc+pen+mob |"), "{md}");
+        assert!(md.lines().all(|l| l.matches('|').count() == 16), "{md}");
         // A cloud without a category: the category-aware block is left out.
         let anon = vec![Cloud {
             category: None,

@@ -56,8 +56,9 @@ pub struct JobRequest {
     /// 1000).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tau: Option<f64>,
-    /// Clamp each guidance-gradient entry to ±this (model space; finite, > 0). A deviation
-    /// from the paper's raw gradient; absent = off.
+    /// Clamp each guidance-gradient entry to ±this (model space; finite, >= 0; default 0.05).
+    /// A deviation from the paper's raw gradient, which diverges with the shipped weights;
+    /// 0 = off (the paper's raw step).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub guidance_max_step: Option<f64>,
     /// Sampler: `ddpm` (default; strided ancestral with fewer steps) or `ddim`.
@@ -219,7 +220,7 @@ pub struct RequestView {
     pub n_g: u32,
     /// Temperature τ of ℓ_pc.
     pub tau: f64,
-    /// Guidance-gradient clamp (absent: off).
+    /// Guidance-gradient clamp (absent: off, the paper's raw gradient).
     pub guidance_max_step: Option<f64>,
     /// Sampler.
     pub sampler: String,

@@ -8,7 +8,9 @@
 //! `INVALID_ARGUMENT`).
 
 use crate::data::categories::category_index;
-use crate::engine::guidance::{DEFAULT_GUIDED_STEPS, DEFAULT_TAU, GuidanceOptions, Terms};
+use crate::engine::guidance::{
+    DEFAULT_GUIDED_STEPS, DEFAULT_MAX_STEP, DEFAULT_TAU, GuidanceOptions, Terms,
+};
 use crate::engine::sample::Sampler;
 use crate::engine::schedule::timesteps;
 use crate::pointcloud::{Format, Limits as CloudLimits, PointCloud, PointCloudError};
@@ -410,11 +412,19 @@ pub fn validate(
             tau,
         ));
     }
-    if let Some(c) = input.guidance_max_step
-        && !(c.is_finite() && c > 0.0)
-    {
-        return Err(violation("guidance_max_step", "finite and > 0", c));
-    }
+    // Absent: physnap's default clamp; 0: off (the paper's raw gradient).
+    let guidance_max_step = match input.guidance_max_step {
+        None => Some(DEFAULT_MAX_STEP),
+        Some(0.0) => None,
+        Some(c) if c.is_finite() && c > 0.0 => Some(c),
+        Some(c) => {
+            return Err(violation(
+                "guidance_max_step",
+                "finite and >= 0 (0: off, the paper's raw gradient)",
+                c,
+            ));
+        }
+    };
     let samples = input.samples.unwrap_or(1);
     if samples == 0 || samples > limits.max_samples {
         return Err(violation(
@@ -460,7 +470,7 @@ pub fn validate(
         w_mob,
         n_g,
         tau,
-        guidance_max_step: input.guidance_max_step,
+        guidance_max_step,
         sampler,
         eta,
         steps,
@@ -537,6 +547,14 @@ mod tests {
         };
         let s = validate(&input, &caps(), &Limits::default(), 0).unwrap();
         assert_eq!((s.steps, s.n_g), (20, 10));
+        // The gradient clamp is on by default; 0 asks for the paper's raw step.
+        assert_eq!(s.guidance_max_step, Some(DEFAULT_MAX_STEP));
+        let raw = JobInput {
+            guidance_max_step: Some(0.0),
+            ..input.clone()
+        };
+        let raw = validate(&raw, &caps(), &Limits::default(), 0).unwrap();
+        assert_eq!(raw.guidance_max_step, None);
         assert_eq!(s.engine_sampler(), Sampler::Ddim { eta: 0.5 });
         // Exactly the last n_g of the strided times fall below the threshold, and that is
         // the CLI's `--guidance-steps 500` for the default.
@@ -617,8 +635,14 @@ mod tests {
             i.eta = Some(1.5);
         });
         assert_eq!((v.field.as_str(), v.value.as_str()), ("eta", "1.5"));
-        let v = bad(&|i| i.guidance_max_step = Some(0.0));
-        assert_eq!(v.field, "guidance_max_step");
+        for (c, shown) in [(-1.0, "-1"), (f64::INFINITY, "inf")] {
+            let v = bad(&|i| i.guidance_max_step = Some(c));
+            assert_eq!(
+                (v.field.as_str(), v.value.as_str()),
+                ("guidance_max_step", shown)
+            );
+            assert!(v.limit.contains(">= 0"), "{v}");
+        }
         let v = bad(&|i| i.points = Some(PointsInput::F32Le(vec![0; 13])));
         assert!(v.limit.contains("multiple of 12"));
         let v = bad(&|i| i.points = Some(PointsInput::Ply(b"ply\nformat nonsense\n".to_vec())));

@@ -17,17 +17,32 @@
 //! by the "no category" row with probability `category_dropout`, so one model serves both the
 //! category-aware and the unconditional mode.
 //!
+//! Learning rate: constant `lr` up to step `lr_decay_start`, then a cosine decay to
+//! `lr · lr_final_factor` at the last step:
+//!
+//! ```text
+//! lr(s) = lr                                                   for s < s₀
+//! lr(s) = lr · [f + (1 − f) · ½(1 + cos(π (s − s₀) / (S − s₀)))]   for s ≥ s₀
+//! ```
+//!
+//! Weight EMA (as in DDPM/NAP sampling practice): after every step the shadow weights follow
+//! `θ̄ ← d θ̄ + (1 − d) θ` with `d = min(ema_decay, (1 + n)/(10 + n))`, n = steps since the EMA
+//! started. The shadow is what `denoiser.safetensors` holds (it is what samples well); the raw
+//! weights are checkpointed beside it as `denoiser_raw.safetensors` so training can continue.
+//! `ema_decay = 0` turns the EMA off (the file then holds the raw weights).
+//!
 //! Reproducibility and resume: step s draws everything from `Rng::fork(seed, s)`, so a resumed
 //! run sees exactly the batches and noise of an uninterrupted one. Checkpoints
-//! (`denoiser.safetensors` + `checkpoint.json`) are written every `checkpoint_every` steps and at
-//! the end; `resume` continues from them. Adam's moment estimates are not checkpointed and
-//! restart from zero on resume (documented deviation; the loss recovers within a few hundred
-//! steps).
+//! (`denoiser.safetensors`, `denoiser_raw.safetensors` + `checkpoint.json`) are written every
+//! `checkpoint_every` steps and at the end; `resume` continues from them. Adam's moment
+//! estimates are not checkpointed and restart from zero on resume (documented deviation; the
+//! loss recovers within a few hundred steps). A checkpoint without a raw file (written before
+//! the EMA existed) resumes from `denoiser.safetensors` and starts the EMA there.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use burn::module::Module;
+use burn::module::{Module, ModuleMapper, ModuleVisitor, Param};
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::tensor::{Int, Tensor, TensorData};
 use serde_json::{Value, json};
@@ -62,6 +77,25 @@ pub struct DiffusionTrainConfig {
     pub category_dropout: f64,
     /// Steps between checkpoints.
     pub checkpoint_every: usize,
+    /// Step from which the learning rate decays (cosine) towards `lr · lr_final_factor`.
+    pub lr_decay_start: usize,
+    /// Final learning rate as a fraction of `lr` (1 = constant).
+    pub lr_final_factor: f64,
+    /// Weight-EMA decay (0 = off).
+    pub ema_decay: f64,
+}
+
+impl DiffusionTrainConfig {
+    /// The learning rate of step `step` (0-based); see the module documentation.
+    pub fn lr_at(&self, step: usize) -> f64 {
+        if step < self.lr_decay_start || self.steps <= self.lr_decay_start + 1 {
+            return self.lr;
+        }
+        let span = (self.steps - 1 - self.lr_decay_start) as f64;
+        let x = ((step - self.lr_decay_start) as f64 / span).min(1.0);
+        let f = self.lr_final_factor;
+        self.lr * (f + (1.0 - f) * 0.5 * (1.0 + (std::f64::consts::PI * x).cos()))
+    }
 }
 
 impl Default for DiffusionTrainConfig {
@@ -75,6 +109,9 @@ impl Default for DiffusionTrainConfig {
             seed: 12345,
             category_dropout: 0.2,
             checkpoint_every: 1000,
+            lr_decay_start: 0,
+            lr_final_factor: 0.1,
+            ema_decay: 0.999,
         }
     }
 }
@@ -210,6 +247,59 @@ pub fn grouped_loss(
     (node + edge).mean().clamp(-100.0, 100.0)
 }
 
+/// Host copies of a module's float parameters, in visiting order.
+struct Collect(Vec<Vec<f32>>);
+
+impl ModuleVisitor for Collect {
+    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+        let v = param.val().into_data().convert::<f32>();
+        self.0.push(v.try_to_vec::<f32>().unwrap_or_default());
+    }
+}
+
+/// `shadow[i] ← d · shadow[i] + (1 − d) · θᵢ` over a module's float parameters.
+struct Blend<'a> {
+    shadow: &'a mut [Vec<f32>],
+    decay: f32,
+    next: usize,
+}
+
+impl ModuleVisitor for Blend<'_> {
+    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+        let v = param.val().into_data().convert::<f32>();
+        let v = v.as_slice::<f32>().unwrap_or(&[]);
+        let s = &mut self.shadow[self.next];
+        let d = self.decay;
+        for (a, b) in s.iter_mut().zip(v) {
+            *a = d * *a + (1.0 - d) * b;
+        }
+        self.next += 1;
+    }
+}
+
+/// Replaces a module's float parameters by the shadow values.
+struct Install<'a> {
+    shadow: &'a [Vec<f32>],
+    next: usize,
+}
+
+impl ModuleMapper for Install<'_> {
+    fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+        let values = self.shadow[self.next].clone();
+        self.next += 1;
+        param.map(|t| {
+            let (shape, device) = (t.shape(), t.device());
+            Tensor::from_data(TensorData::new(values, shape), &device)
+        })
+    }
+}
+
+fn collect<M: Module>(m: &M) -> Vec<Vec<f32>> {
+    let mut c = Collect(Vec::new());
+    m.visit(&mut c);
+    c.0
+}
+
 /// What the run did.
 #[derive(Debug, Clone)]
 pub struct DiffusionTrainReport {
@@ -265,6 +355,18 @@ pub fn train_diffusion(
             "within [0, 1]",
             cfg.category_dropout.to_string(),
         ),
+        (
+            "lr_final_factor",
+            cfg.lr_final_factor > 0.0 && cfg.lr_final_factor <= 1.0,
+            "within (0, 1]",
+            cfg.lr_final_factor.to_string(),
+        ),
+        (
+            "ema_decay",
+            (0.0..1.0).contains(&cfg.ema_decay),
+            "within [0, 1)",
+            cfg.ema_decay.to_string(),
+        ),
     ] {
         if !ok {
             return Err(TrainError::Config {
@@ -279,12 +381,30 @@ pub fn train_diffusion(
     let schedule = Schedule::default();
     let mut model = Denoiser::new(&cfg.model, &device)?;
     let weights_path = out.join("denoiser.safetensors");
+    let raw_path = out.join("denoiser_raw.safetensors");
     let ckpt_path = out.join("checkpoint.json");
     let mut start = 0usize;
+    let mut ema_steps = 0usize;
+    let mut shadow: Option<Vec<Vec<f32>>> = None;
     if resume && ckpt_path.is_file() {
         let ck = read_json(&ckpt_path)?;
         start = ck["step"].as_u64().unwrap_or(0) as usize;
-        weights::load(&mut model, &weights_path, ck["sha256"].as_str())?;
+        match ck["raw_sha256"].as_str() {
+            Some(raw_sha) if raw_path.is_file() => {
+                weights::load(&mut model, &raw_path, Some(raw_sha))?;
+                let mut ema_model = Denoiser::new(&cfg.model, &device)?;
+                weights::load(&mut ema_model, &weights_path, ck["sha256"].as_str())?;
+                shadow = Some(collect(&ema_model));
+                ema_steps = ck["ema_steps"].as_u64().unwrap_or(0) as usize;
+            }
+            _ => weights::load(&mut model, &weights_path, ck["sha256"].as_str())?,
+        }
+    }
+    if cfg.ema_decay > 0.0 && shadow.is_none() {
+        shadow = Some(collect(&model));
+    }
+    if cfg.ema_decay == 0.0 {
+        shadow = None;
     }
     let mut optim = AdamConfig::new().init();
     let t0 = Instant::now();
@@ -362,7 +482,17 @@ pub fn train_diffusion(
             return Err(TrainError::Diverged { step, loss: value });
         }
         let grads = GradientsParams::from_grads(loss.backward(), &model);
-        model = optim.step(cfg.lr, model, grads);
+        model = optim.step(cfg.lr_at(step), model, grads);
+        if let Some(shadow) = shadow.as_mut() {
+            let n = ema_steps as f64;
+            let decay = cfg.ema_decay.min((1.0 + n) / (10.0 + n)) as f32;
+            model.visit(&mut Blend {
+                shadow,
+                decay,
+                next: 0,
+            });
+            ema_steps += 1;
+        }
         ema = if ema.is_nan() {
             value
         } else {
@@ -376,8 +506,19 @@ pub fn train_diffusion(
             elapsed: t0.elapsed().as_secs_f64(),
         });
         if (step + 1) % cfg.checkpoint_every == 0 || step + 1 == cfg.steps {
-            sha = weights::save(&model.valid(), &weights_path)?;
-            let ck = json!({ "step": step + 1, "sha256": sha, "loss_ema": ema });
+            let ck = match shadow.as_ref() {
+                Some(shadow) => {
+                    let raw_sha = weights::save(&model.valid(), &raw_path)?;
+                    let averaged = model.valid().map(&mut Install { shadow, next: 0 });
+                    sha = weights::save(&averaged, &weights_path)?;
+                    json!({ "step": step + 1, "sha256": sha, "raw_sha256": raw_sha,
+                            "ema_steps": ema_steps, "loss_ema": ema })
+                }
+                None => {
+                    sha = weights::save(&model.valid(), &weights_path)?;
+                    json!({ "step": step + 1, "sha256": sha, "loss_ema": ema })
+                }
+            };
             std::fs::write(&ckpt_path, ck.to_string())
                 .map_err(|e| data_err(&ckpt_path, e.to_string()))?;
         }
@@ -392,6 +533,8 @@ pub fn train_diffusion(
     let summary = json!({
         "steps": cfg.steps, "resumed_from": start, "wall_seconds": wall, "final_loss_ema": ema,
         "batch_objects": cfg.batch_objects, "noise_levels": cfg.noise_levels, "lr": cfg.lr,
+        "lr_decay_start": cfg.lr_decay_start, "lr_final_factor": cfg.lr_final_factor,
+        "ema_decay": cfg.ema_decay, "ema_steps": ema_steps,
         "seed": cfg.seed, "category_dropout": cfg.category_dropout,
         "feature_scales": { "node": data.scales.node, "edge": data.scales.edge },
         "categories": CATEGORIES.to_vec(), "train_objects": data.graphs.len(), "sha256": sha,
@@ -467,6 +610,9 @@ mod tests {
             seed: 1,
             category_dropout: 0.2,
             checkpoint_every: 20,
+            lr_decay_start: 40,
+            lr_final_factor: 0.1,
+            ema_decay: 0.9,
         }
     }
 
@@ -483,6 +629,9 @@ mod tests {
         let last: f64 = losses[50..].iter().sum::<f64>() / 10.0;
         assert!(last < 0.8 * first, "loss did not fall: {first} -> {last}");
         assert!(report.weights.is_file() && dir.path().join("checkpoint.json").is_file());
+        // The shipped file is the EMA, the raw weights sit beside it and differ.
+        let raw = std::fs::read(dir.path().join("denoiser_raw.safetensors")).unwrap();
+        assert_ne!(raw, std::fs::read(&report.weights).unwrap());
         // Resume: a run to 80 steps continues from step 60.
         let mut steps = Vec::new();
         train_diffusion(&data, &tiny_config(80), dir.path(), true, &mut |p| {
@@ -508,5 +657,58 @@ mod tests {
         .unwrap()
         .to_string();
         assert!(e.contains("category_dropout") && e.contains("1.5"), "{e}");
+    }
+
+    #[test]
+    fn learning_rate_is_constant_then_decays_to_the_final_factor() {
+        let cfg = DiffusionTrainConfig {
+            steps: 101,
+            lr: 1e-3,
+            lr_decay_start: 50,
+            lr_final_factor: 0.1,
+            ..DiffusionTrainConfig::default()
+        };
+        assert_eq!(cfg.lr_at(0), 1e-3);
+        assert_eq!(cfg.lr_at(49), 1e-3);
+        assert_eq!(cfg.lr_at(50), 1e-3);
+        assert!((cfg.lr_at(100) - 1e-4).abs() < 1e-12, "{}", cfg.lr_at(100));
+        assert!((cfg.lr_at(75) - 5.5e-4).abs() < 1e-9, "{}", cfg.lr_at(75));
+        for s in 50..100 {
+            assert!(cfg.lr_at(s + 1) < cfg.lr_at(s));
+        }
+        let constant = DiffusionTrainConfig {
+            lr_final_factor: 1.0,
+            ..cfg
+        };
+        assert_eq!(constant.lr_at(100), 1e-3);
+    }
+
+    #[test]
+    fn ema_blends_and_installs_every_parameter() {
+        let device = crate::model::cpu();
+        let cfg = tiny_config(1).model;
+        let a = Denoiser::with_seed(&cfg, &device, 1).unwrap();
+        let b = Denoiser::with_seed(&cfg, &device, 2).unwrap();
+        let (va, vb) = (collect(&a), collect(&b));
+        assert_ne!(va, vb, "two initialisations should differ");
+        let mut shadow = va.clone();
+        b.visit(&mut Blend {
+            shadow: &mut shadow,
+            decay: 0.25,
+            next: 0,
+        });
+        let installed = collect(&a.map(&mut Install {
+            shadow: &shadow,
+            next: 0,
+        }));
+        assert_eq!(installed.len(), va.len());
+        for ((x, y), z) in va
+            .iter()
+            .flatten()
+            .zip(vb.iter().flatten())
+            .zip(installed.iter().flatten())
+        {
+            assert!((0.25 * x + 0.75 * y - z).abs() < 1e-6);
+        }
     }
 }

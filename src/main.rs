@@ -249,11 +249,12 @@ struct SamplingArgs {
     /// raw gradient, which diverges with the shipped weights. 0: off (the paper's raw step).
     #[arg(long, env = "PHYSNAP_GUIDANCE_MAX_STEP", default_value_t = physnap::engine::guidance::DEFAULT_MAX_STEP)]
     guidance_max_step: f64,
-    /// Reverse-step rule: ddpm (NAP; strided ancestral with --steps) or ddim.
-    #[arg(long, env = "PHYSNAP_SAMPLER", default_value = "ddpm", value_parser = ["ddpm", "ddim"])]
+    /// Reverse-step rule: ddim (default) or ddpm (NAP; strided ancestral with --steps < 1000).
+    /// The paper's sampler is `--sampler ddpm --steps 0`.
+    #[arg(long, env = "PHYSNAP_SAMPLER", default_value = "ddim", value_parser = ["ddpm", "ddim"])]
     sampler: String,
-    /// Reverse steps (0: all 1000).
-    #[arg(long, env = "PHYSNAP_STEPS", default_value_t = 0)]
+    /// Reverse steps (0: all 1000). Guidance applies to those with t < --guidance-steps.
+    #[arg(long, env = "PHYSNAP_STEPS", default_value_t = physnap::engine::sample::DEFAULT_STEPS)]
     steps: usize,
     /// DDIM noise level η in [0, 1].
     #[arg(long, env = "PHYSNAP_DDIM_ETA", default_value_t = 0.0)]

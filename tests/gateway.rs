@@ -86,6 +86,7 @@ async fn rest_sse_and_grpc_through_caddy() {
         .post(format!("{gw}/v1/jobs"))
         .json(
             &json!({"points": cloud(32), "samples": 4, "resolution": 8, "seed": 2,
+                       "sampler": "ddpm", "steps": 1000,
                        "w_pc": 0.0, "w_pen": 0.0, "w_mob": 0.0}),
         )
         .send()

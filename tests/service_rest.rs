@@ -46,7 +46,7 @@ async fn submit_stream_download_validate_resume() {
         &c,
         &s.url("/v1/jobs"),
         json!({"points": points_json(64), "category": "Laptop", "seed": 5,
-               "preview_every": 250, "resolution": 16,
+               "preview_every": 50, "resolution": 16,
                "w_pc": 0.0, "w_pen": 0.0, "w_mob": 0.0}),
     )
     .await;
@@ -85,7 +85,7 @@ async fn submit_stream_download_validate_resume() {
         .collect();
     assert!(!progress.is_empty(), "no progress events: {kinds:?}");
     for p in &progress {
-        assert_eq!(p["total_steps"], 1000);
+        assert_eq!(p["total_steps"], 200); // the default: DDIM over 200 steps
         assert!(p["step"].as_u64().unwrap() >= 1);
         assert!(["denoising", "meshing", "exporting"].contains(&p["phase"].as_str().unwrap()));
     }
@@ -94,7 +94,7 @@ async fn submit_stream_download_validate_resume() {
         .iter()
         .find(|p| p.get("preview").is_some())
         .expect("a progress event with an x̂₀ preview");
-    assert!(preview["step"].as_u64().unwrap() % 250 == 0 || preview["step"] == 1000);
+    assert!(preview["step"].as_u64().unwrap() % 50 == 0 || preview["step"] == 200);
     assert!(!preview["preview"]["parts"].as_array().unwrap().is_empty());
     // Persisted events carry contiguous sequences 1..=N; progress ids repeat the last one.
     let persisted: Vec<u64> = evs
@@ -299,7 +299,8 @@ async fn queue_full_429_cancel_and_deadline() {
     .await;
     let c = client();
     let long = |extra: Value| {
-        let mut b = json!({"points": points_json(32), "samples": 16, "resolution": 8});
+        let mut b = json!({"points": points_json(32), "samples": 16, "resolution": 8,
+                           "sampler": "ddpm", "steps": 1000});
         for (k, v) in extra.as_object().unwrap() {
             b[k] = v.clone();
         }
@@ -682,7 +683,7 @@ async fn sse_resume_mid_run_loses_no_state_event() {
         &c,
         &s.url("/v1/jobs"),
         json!({"points": points_json(32), "samples": 8, "resolution": 8, "seed": 3,
-               "w_pc": 0.0, "w_pen": 0.0, "w_mob": 0.0}),
+               "sampler": "ddpm", "steps": 1000, "w_pc": 0.0, "w_pen": 0.0, "w_mob": 0.0}),
     )
     .await
     .json()

@@ -83,7 +83,9 @@ async fn kill_9_mid_run_then_restart_finishes_once_with_same_bytes() {
     let root = tempfile::tempdir().unwrap();
     tiny_weights(&root.path().join("weights"));
     let c = reqwest::Client::new();
+    // The paper's 1000-step sampler: a long job that is surely still running at step 100.
     let body = json!({"points": cloud(30), "seed": 11, "samples": 6, "resolution": 8,
+                      "sampler": "ddpm", "steps": 1000,
                       "category": "Door", "w_pc": 0.0, "w_pen": 0.0, "w_mob": 0.0});
 
     let server = spawn(root.path());

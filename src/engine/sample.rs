@@ -33,6 +33,12 @@ pub enum Sampler {
     },
 }
 
+/// The reverse steps physnap's CLI and service use by default: DDIM (η = 0) over 200 of the
+/// 1000 schedule steps, the last 100 of them guided (n_g = 500 of 1000, scaled). The paper's
+/// 1000-step DDPM with n_g = 500 takes minutes per guided sample on 2 cores; EVALUATION.md
+/// ("Fast sampling") compares the two. [`SampleRequest::default`] stays the paper's sampler.
+pub const DEFAULT_STEPS: usize = 200;
+
 /// Largest |∇ℓ| entry a guided step may subtract (model space, where features are scaled to
 /// about [−1, 1]); a step that throws a value this far is a blow-up and fails as diverged.
 pub const DIVERGENCE_LIMIT: f32 = 1e4;

@@ -61,13 +61,14 @@ pub struct JobRequest {
     /// 0 = off (the paper's raw step).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub guidance_max_step: Option<f64>,
-    /// Sampler: `ddpm` (default; strided ancestral with fewer steps) or `ddim`.
+    /// Sampler: `ddim` (default) or `ddpm` (NAP's; strided ancestral with fewer steps). The
+    /// paper's sampler is `ddpm` with 1000 steps.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sampler: Option<String>,
-    /// DDIM noise level η in [0, 1] (default 0); only with `sampler` `ddim`.
+    /// DDIM noise level η in [0, 1] (default 0); only with `sampler` `ddim` (the default).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub eta: Option<f64>,
-    /// Reverse steps, 1–1000 (default 1000, the full schedule).
+    /// Reverse steps, 1–1000 (default 200; 1000 is the full schedule).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub steps: Option<u32>,
     /// Seed of sample 0; absent = random, echoed in `request.seed`.

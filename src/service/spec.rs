@@ -11,6 +11,7 @@ use crate::data::categories::category_index;
 use crate::engine::guidance::{
     DEFAULT_GUIDED_STEPS, DEFAULT_MAX_STEP, DEFAULT_TAU, GuidanceOptions, Terms,
 };
+use crate::engine::sample::DEFAULT_STEPS;
 use crate::engine::sample::Sampler;
 use crate::engine::schedule::timesteps;
 use crate::pointcloud::{Format, Limits as CloudLimits, PointCloud, PointCloudError};
@@ -361,7 +362,7 @@ pub fn validate(
         .sampler
         .clone()
         .filter(|s| !s.is_empty())
-        .unwrap_or_else(|| SAMPLER_DDPM.to_string());
+        .unwrap_or_else(|| SAMPLER_DDIM.to_string());
     if sampler != SAMPLER_DDPM && sampler != SAMPLER_DDIM {
         return Err(violation(
             "sampler",
@@ -383,7 +384,9 @@ pub fn validate(
         }
         Some(e) => e,
     };
-    let steps = input.steps.unwrap_or(caps.schedule_steps);
+    let steps = input
+        .steps
+        .unwrap_or((DEFAULT_STEPS as u32).min(caps.schedule_steps));
     if steps == 0 || steps > caps.schedule_steps {
         return Err(violation(
             "steps",
@@ -505,12 +508,27 @@ mod tests {
             ..Default::default()
         };
         let s = validate(&input, &caps(), &Limits::default(), 77).unwrap();
-        assert_eq!((s.seed, s.samples, s.steps, s.n_g), (77, 1, 1000, 500));
-        assert_eq!((s.tau, s.sampler.as_str(), s.eta), (1000.0, "ddpm", 0.0));
+        // physnap's fast default: DDIM over 200 steps, the last 100 guided (t < 500, as the
+        // paper's n_g = 500 of 1000), with the gradient clamp.
+        assert_eq!((s.seed, s.samples, s.steps, s.n_g), (77, 1, 200, 100));
+        assert_eq!((s.tau, s.sampler.as_str(), s.eta), (1000.0, "ddim", 0.0));
+        assert_eq!(s.engine_sampler(), Sampler::Ddim { eta: 0.0 });
+        assert_eq!(s.guidance_max_step, Some(DEFAULT_MAX_STEP));
         assert_eq!((s.w_pc, s.w_pen, s.w_mob), (15.0, 2.0 / 3.0, 2.0 / 3.0));
         assert!(s.guided());
         assert_eq!(s.guidance_threshold(1000), 500);
         assert_eq!(s.points.len(), 16);
+        // The paper's sampler is one field away.
+        let paper = JobInput {
+            sampler: Some("ddpm".into()),
+            steps: Some(1000),
+            ..input
+        };
+        let s = validate(&paper, &caps(), &Limits::default(), 77).unwrap();
+        assert_eq!(
+            (s.steps, s.n_g, s.engine_sampler()),
+            (1000, 500, Sampler::Ddpm)
+        );
     }
 
     #[test]
@@ -628,7 +646,10 @@ mod tests {
             ("sampler", "\"euler\"")
         );
         assert!(v.limit.contains("ddim"), "{v}");
-        let v = bad(&|i| i.eta = Some(0.5));
+        let v = bad(&|i| {
+            i.sampler = Some("ddpm".into());
+            i.eta = Some(0.5);
+        });
         assert_eq!(v.field, "eta");
         let v = bad(&|i| {
             i.sampler = Some("ddim".into());

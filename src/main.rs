@@ -303,6 +303,35 @@ struct EvalGuidedArgs {
     /// Category-aware blocks: no, yes, or both (both when the weights are category-conditional).
     #[arg(long, env = "PHYSNAP_CATEGORY_AWARE", default_value = "both", value_parser = ["no", "yes", "both"])]
     category_aware: String,
+    /// Run a hyper-parameter sweep of the supplementary material instead of Table 1: pc, pen or
+    /// mob (that loss alone over --sweep-ng × --sweep-weights) or tau (ℓ_pc alone over
+    /// --sweep-tau); each block starts with the unguided baseline. Writes sweep_<kind>.md/json.
+    #[arg(long, env = "PHYSNAP_SWEEP", value_parser = ["pc", "pen", "mob", "tau"])]
+    sweep: Option<String>,
+    /// n_g values of a sweep (diffusion time t < n_g is guided).
+    #[arg(
+        long,
+        env = "PHYSNAP_SWEEP_NG",
+        value_delimiter = ',',
+        default_value = "100,500,1000"
+    )]
+    sweep_ng: Vec<usize>,
+    /// Weight multipliers of a sweep (× the loss's base weight: 45, 2, 2).
+    #[arg(
+        long,
+        env = "PHYSNAP_SWEEP_WEIGHTS",
+        value_delimiter = ',',
+        default_value = "0.1,0.3,1,3,10"
+    )]
+    sweep_weights: Vec<f64>,
+    /// τ values of a `--sweep tau` (paper: 10² and 10³ were the candidates).
+    #[arg(
+        long,
+        env = "PHYSNAP_SWEEP_TAU",
+        value_delimiter = ',',
+        default_value = "10,100,1000,10000"
+    )]
+    sweep_tau: Vec<f64>,
     /// Joint states per object of the instantiation distance (NAP: 10).
     #[arg(long, env = "PHYSNAP_ID_STATES", default_value_t = 4)]
     id_states: usize,

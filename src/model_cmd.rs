@@ -442,9 +442,15 @@ fn read_clouds(dir: &Path, max: usize) -> anyhow::Result<Vec<physnap::eval::guid
 
 pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
     use physnap::eval::generative::IdOptions;
-    use physnap::eval::guided::{TableOptions, guided_table, table_markdown};
+    use physnap::eval::guided::{
+        SweepKind, TableOptions, guided_table, run_rows, sweep_rows, table_markdown,
+    };
     if a.samples_per_cloud == 0 {
         bail!("invalid --samples-per-cloud: 0 (must be at least 1)");
+    }
+    let sweep = a.sweep.as_deref().map(SweepKind::parse).transpose()?;
+    if sweep.is_some() && !a.variants.is_empty() {
+        bail!("invalid --variants with --sweep: a sweep chooses its own rows (drop one of them)");
     }
     let device = physnap::model::cpu();
     let models = load_models(&a.weights, &device)?;
@@ -507,29 +513,60 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         bail!("invalid --category-aware yes: the weights' denoiser has no category input");
     }
     let blocks = opts.category_aware.len();
-    let variants = if a.variants.is_empty() {
-        5
-    } else {
-        a.variants.len()
+    let specs = match sweep {
+        Some(kind) => Some(sweep_rows(
+            kind,
+            &opts.category_aware,
+            &a.sweep_ng,
+            &a.sweep_weights,
+            &a.sweep_tau,
+            a.sampling.guidance_steps,
+            a.sampling.tau,
+        )?),
+        None => None,
+    };
+    let rows_planned = match &specs {
+        Some(s) => s.len(),
+        None if a.variants.is_empty() => 5 * blocks,
+        None => a.variants.len() * blocks,
     };
     let pb = super::progress_bar(
-        blocks * variants * clouds.len() * a.samples_per_cloud,
+        rows_planned * clouds.len() * a.samples_per_cloud,
         "eval guided",
     );
-    let rows = guided_table(
-        &models.denoiser,
-        &decoder,
-        &models.manifest.feature_scales,
-        &Schedule::default(),
-        &clouds,
-        &opts,
-        &mut |done, _| pb.set_position(done as u64),
-    )?;
+    let scales = &models.manifest.feature_scales;
+    let schedule = Schedule::default();
+    let on_sample = &mut |done: usize, _: usize| pb.set_position(done as u64);
+    let rows = match &specs {
+        Some(specs) => run_rows(
+            &models.denoiser,
+            &decoder,
+            scales,
+            &schedule,
+            &clouds,
+            &opts,
+            specs,
+            on_sample,
+        )?,
+        None => guided_table(
+            &models.denoiser,
+            &decoder,
+            scales,
+            &schedule,
+            &clouds,
+            &opts,
+            on_sample,
+        )?,
+    };
     pb.finish_and_clear();
+    let stem = match sweep {
+        Some(kind) => format!("sweep_{}", kind.name()),
+        None => "guided_table".to_string(),
+    };
     let md = table_markdown(&rows);
     print!("{md}");
     std::fs::create_dir_all(&a.out)?;
-    std::fs::write(a.out.join("guided_table.md"), &md)?;
+    std::fs::write(a.out.join(format!("{stem}.md")), &md)?;
     let num = |v: f64| {
         if v.is_finite() {
             serde_json::json!(v)
@@ -550,8 +587,12 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
             "data": d.display().to_string(), "per_cloud": per_cloud,
             "id_states": a.id_states, "id_points": a.id_points,
         })),
+        "sweep": a.sweep,
         "rows": rows.iter().map(|r| serde_json::json!({
             "category_aware": r.category_aware, "variant": r.variant,
+            "guidance": r.guidance.map(|g| serde_json::json!({
+                "w_pc": g.w_pc, "w_pen": g.w_pen, "w_mob": g.w_mob, "n_g": g.steps, "tau": g.tau,
+            })),
             "e_pc": num(r.e_pc), "d_pc": num(r.d_pc), "e_pen": num(r.e_pen), "e_mob": num(r.e_mob),
             "e_pen_mean": num(r.e_pen_mean), "e_mob_mean": num(r.e_mob_mean),
             "pen_share": num(r.pen_share), "mob_share": num(r.mob_share),
@@ -560,9 +601,9 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         })).collect::<Vec<_>>(),
     });
     std::fs::write(
-        a.out.join("guided_table.json"),
+        a.out.join(format!("{stem}.json")),
         serde_json::to_string_pretty(&json)? + "\n",
     )?;
-    println!("table: {}", a.out.join("guided_table.md").display());
+    println!("table: {}", a.out.join(format!("{stem}.md")).display());
     Ok(())
 }

@@ -292,4 +292,45 @@ fn eval_guided_refuses_unknown_variants_and_empty_cloud_folders() {
         "{e}"
     );
     assert!(!dir.path().join("out/guided_table.md").exists());
+    // A sweep picks its own rows; bad sweep values are named.
+    let o = run(args(&["--sweep", "pen", "--variants", "pc"]));
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("--variants with --sweep"),
+        "{}",
+        stderr(&o)
+    );
+    let o = run(args(&["--sweep", "mob", "--sweep-weights", "1,0"]));
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(e.contains("sweep_weights") && e.contains("> 0"), "{e}");
+    // A tiny τ sweep runs end to end: the baseline row and one row per τ.
+    let o = run(args(&[
+        "--sweep",
+        "tau",
+        "--sweep-tau",
+        "100,1000",
+        "--samples-per-cloud",
+        "1",
+        "--category-aware",
+        "no",
+        "--steps",
+        "3",
+        "--resolution",
+        "8",
+    ]));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let md = std::fs::read_to_string(dir.path().join("out/sweep_tau.md")).unwrap();
+    assert!(
+        md.contains("| no | uncond |") && md.contains("| no | pc τ=1000 |"),
+        "{md}"
+    );
+    assert_eq!(md.lines().count(), 2 + 3, "{md}");
+    let json: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("out/sweep_tau.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(json["sweep"], "tau");
+    assert_eq!(json["rows"][1]["guidance"]["tau"], 100.0);
+    assert_eq!(json["rows"][1]["guidance"]["w_pc"], 45.0);
 }

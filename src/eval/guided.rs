@@ -269,8 +269,10 @@ pub struct TableOptions {
 pub struct TableRow {
     /// Category-aware block.
     pub category_aware: bool,
-    /// Variant name.
-    pub variant: &'static str,
+    /// Variant name (Table 1) or sweep point label.
+    pub variant: String,
+    /// The guidance this row ran (None: unguided).
+    pub guidance: Option<GuidanceSetting>,
     /// Median E_pc.
     pub e_pc: f64,
     /// Median D_pc.
@@ -313,19 +315,6 @@ pub fn guided_table(
     opts: &TableOptions,
     on_sample: &mut dyn FnMut(usize, usize),
 ) -> Result<Vec<TableRow>, EngineError> {
-    if opts.samples_per_cloud == 0 {
-        return Err(EngineError::Invalid {
-            field: "samples_per_cloud".into(),
-            limit: "at least 1".into(),
-            value: "0".into(),
-        });
-    }
-    let blocks: Vec<bool> = opts
-        .category_aware
-        .iter()
-        .copied()
-        .filter(|&aware| !aware || clouds.iter().all(|c| c.category.is_some()))
-        .collect();
     let variants: Vec<Variant> = VARIANTS
         .into_iter()
         .filter(|v| opts.variants.is_empty() || opts.variants.iter().any(|n| n == v.name))
@@ -341,11 +330,226 @@ pub fn guided_table(
             value: unknown.clone(),
         });
     }
-    let total = blocks.len() * variants.len() * clouds.len() * opts.samples_per_cloud;
+    let specs: Vec<RowSpec> = opts
+        .category_aware
+        .iter()
+        .flat_map(|&aware| {
+            variants.iter().map(move |v| RowSpec {
+                category_aware: aware,
+                label: v.name.to_string(),
+                guidance: v
+                    .terms
+                    .map(|t| GuidanceSetting::paper(t, opts.guided_steps, opts.tau)),
+            })
+        })
+        .collect();
+    run_rows(
+        denoiser, decoder, scales, schedule, clouds, opts, &specs, on_sample,
+    )
+}
+
+/// Guidance of one row: weights, n_g (diffusion time t < steps is guided) and τ.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GuidanceSetting {
+    /// Weight of ℓ_pc.
+    pub w_pc: f64,
+    /// Weight of ℓ_pen.
+    pub w_pen: f64,
+    /// Weight of ℓ_mob.
+    pub w_mob: f64,
+    /// n_g.
+    pub steps: usize,
+    /// τ.
+    pub tau: f64,
+}
+
+impl GuidanceSetting {
+    /// The paper's weights for `terms` (base ÷ active terms).
+    pub fn paper(terms: Terms, steps: usize, tau: f64) -> Self {
+        let p = GuidanceOptions::paper(Vec::new(), terms);
+        GuidanceSetting {
+            w_pc: p.w_pc,
+            w_pen: p.w_pen,
+            w_mob: p.w_mob,
+            steps,
+            tau,
+        }
+    }
+}
+
+/// One row to run: its block, label and guidance.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RowSpec {
+    /// Category-aware block.
+    pub category_aware: bool,
+    /// Row label.
+    pub label: String,
+    /// Guidance (None: unguided).
+    pub guidance: Option<GuidanceSetting>,
+}
+
+/// Which hyper-parameter a sweep varies (supplementary material, Figs. 7–13).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SweepKind {
+    /// ℓ_pc alone: n_g × w_pc.
+    Pc,
+    /// ℓ_pen alone: n_g × w_pen.
+    Pen,
+    /// ℓ_mob alone: n_g × w_mob.
+    Mob,
+    /// ℓ_pc alone at the base weight and the given n_g: τ.
+    Tau,
+}
+
+impl SweepKind {
+    /// Parse `pc`, `pen`, `mob` or `tau`.
+    pub fn parse(name: &str) -> Result<Self, EngineError> {
+        match name {
+            "pc" => Ok(SweepKind::Pc),
+            "pen" => Ok(SweepKind::Pen),
+            "mob" => Ok(SweepKind::Mob),
+            "tau" => Ok(SweepKind::Tau),
+            other => Err(EngineError::Invalid {
+                field: "sweep".into(),
+                limit: "one of pc, pen, mob, tau".into(),
+                value: other.into(),
+            }),
+        }
+    }
+
+    /// The lowercase name.
+    pub fn name(self) -> &'static str {
+        match self {
+            SweepKind::Pc => "pc",
+            SweepKind::Pen => "pen",
+            SweepKind::Mob => "mob",
+            SweepKind::Tau => "tau",
+        }
+    }
+}
+
+/// The rows of a sweep: per block, the unguided baseline (the paper's black NAP line), then
+/// every (n_g, weight multiplier) point of the single loss — weight = base weight × multiplier
+/// — or, for τ, every τ with ℓ_pc at its base weight and n_g = `default_steps`.
+pub fn sweep_rows(
+    kind: SweepKind,
+    blocks: &[bool],
+    n_gs: &[usize],
+    multipliers: &[f64],
+    taus: &[f64],
+    default_steps: usize,
+    default_tau: f64,
+) -> Result<Vec<RowSpec>, EngineError> {
+    let bad = |field: &str, limit: &str, value: String| {
+        Err(EngineError::Invalid {
+            field: field.into(),
+            limit: limit.into(),
+            value,
+        })
+    };
+    if kind == SweepKind::Tau {
+        if taus.is_empty() {
+            return bad("sweep_tau", "at least one value", "none".into());
+        }
+    } else {
+        if n_gs.is_empty() {
+            return bad("sweep_ng", "at least one value", "none".into());
+        }
+        if let Some(m) = multipliers.iter().find(|m| !(m.is_finite() && **m > 0.0)) {
+            return bad("sweep_weights", "finite multipliers > 0", m.to_string());
+        }
+        if multipliers.is_empty() {
+            return bad("sweep_weights", "at least one value", "none".into());
+        }
+    }
+    let single = |pc, pen, mob| Terms { pc, pen, mob };
+    let mut rows = Vec::new();
+    for &aware in blocks {
+        rows.push(RowSpec {
+            category_aware: aware,
+            label: "uncond".into(),
+            guidance: None,
+        });
+        match kind {
+            SweepKind::Tau => {
+                for &tau in taus {
+                    rows.push(RowSpec {
+                        category_aware: aware,
+                        label: format!("pc τ={}", short(tau)),
+                        guidance: Some(GuidanceSetting::paper(
+                            single(true, false, false),
+                            default_steps,
+                            tau,
+                        )),
+                    });
+                }
+            }
+            _ => {
+                let terms = single(
+                    kind == SweepKind::Pc,
+                    kind == SweepKind::Pen,
+                    kind == SweepKind::Mob,
+                );
+                let base = GuidanceSetting::paper(terms, default_steps, default_tau);
+                for &n_g in n_gs {
+                    for &m in multipliers {
+                        let g = GuidanceSetting {
+                            w_pc: base.w_pc * m,
+                            w_pen: base.w_pen * m,
+                            w_mob: base.w_mob * m,
+                            steps: n_g,
+                            ..base
+                        };
+                        let w = short(g.w_pc + g.w_pen + g.w_mob);
+                        rows.push(RowSpec {
+                            category_aware: aware,
+                            label: format!("{} n_g={n_g} w={w}", kind.name()),
+                            guidance: Some(g),
+                        });
+                    }
+                }
+            }
+        }
+    }
+    Ok(rows)
+}
+
+/// A number with at most four decimals and no trailing zeros (row labels).
+fn short(v: f64) -> String {
+    let s = format!("{v:.4}");
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    s.to_string()
+}
+
+/// Run arbitrary rows (Table 1 variants or sweep points) over every cloud and sample.
+#[allow(clippy::too_many_arguments)]
+pub fn run_rows(
+    denoiser: &Denoiser,
+    decoder: &LatentSdfDecoder,
+    scales: &FeatureScales,
+    schedule: &Schedule,
+    clouds: &[Cloud],
+    opts: &TableOptions,
+    specs: &[RowSpec],
+    on_sample: &mut dyn FnMut(usize, usize),
+) -> Result<Vec<TableRow>, EngineError> {
+    if opts.samples_per_cloud == 0 {
+        return Err(EngineError::Invalid {
+            field: "samples_per_cloud".into(),
+            limit: "at least 1".into(),
+            value: "0".into(),
+        });
+    }
+    let specs: Vec<&RowSpec> = specs
+        .iter()
+        .filter(|s| !s.category_aware || clouds.iter().all(|c| c.category.is_some()))
+        .collect();
+    let total = specs.len() * clouds.len() * opts.samples_per_cloud;
     let mut done = 0;
     let mut rows = Vec::new();
-    for &aware in &blocks {
-        for &variant in &variants {
+    for spec in specs {
+        let aware = spec.category_aware;
+        {
             let started = std::time::Instant::now();
             let mut values: [Vec<f64>; 4] = Default::default();
             let mut per_cloud: [Vec<f64>; 2] = Default::default();
@@ -353,11 +557,14 @@ pub fn guided_table(
             for (c, cloud) in clouds.iter().enumerate() {
                 let refs = opts.references.get(c).map(Vec::as_slice).unwrap_or(&[]);
                 let mut generated: Vec<StateClouds> = Vec::new();
-                let guidance = variant.terms.map(|t| GuidanceOptions {
-                    steps: opts.guided_steps,
-                    tau: opts.tau,
+                let guidance = spec.guidance.map(|s| GuidanceOptions {
+                    points: cloud.points.clone(),
+                    w_pc: s.w_pc,
+                    w_pen: s.w_pen,
+                    w_mob: s.w_mob,
+                    steps: s.steps,
+                    tau: s.tau,
                     max_step: opts.max_step,
-                    ..GuidanceOptions::paper(cloud.points.clone(), t)
                 });
                 for k in 0..opts.samples_per_cloud {
                     let req = GenerateRequest {
@@ -411,7 +618,8 @@ pub fn guided_table(
             let n = values[0].len();
             rows.push(TableRow {
                 category_aware: aware,
-                variant: variant.name,
+                variant: spec.label.clone(),
+                guidance: spec.guidance,
                 e_pc: median(&values[0]),
                 d_pc: median(&values[1]),
                 e_pen: median(&values[2]),
@@ -651,8 +859,10 @@ mod tests {
             },
         )
         .unwrap();
-        let labels: Vec<(bool, &str)> =
-            rows.iter().map(|r| (r.category_aware, r.variant)).collect();
+        let labels: Vec<(bool, &str)> = rows
+            .iter()
+            .map(|r| (r.category_aware, r.variant.as_str()))
+            .collect();
         let names: Vec<&str> = VARIANTS.iter().map(|v| v.name).collect();
         let want: Vec<(bool, &str)> = [false, true]
             .iter()
@@ -698,7 +908,7 @@ mod tests {
             &mut |_, _| {},
         )
         .unwrap();
-        let names: Vec<&str> = rows.iter().map(|r| r.variant).collect();
+        let names: Vec<&str> = rows.iter().map(|r| r.variant.as_str()).collect();
         assert_eq!(names, ["pc", "uncond"]);
         let err = guided_table(
             &denoiser,
@@ -708,13 +918,89 @@ mod tests {
             &clouds,
             &TableOptions {
                 variants: vec!["pc+penn".into()],
-                ..opts
+                ..opts.clone()
             },
             &mut |_, _| {},
         )
         .unwrap_err()
         .to_string();
         assert!(err.contains("variants") && err.contains("pc+penn"), "{err}");
+
+        // A sweep: the baseline plus every (n_g, weight) point, each run with its own guidance.
+        let specs = sweep_rows(
+            SweepKind::Pen,
+            &[false],
+            &[2, 1000],
+            &[0.5, 4.0],
+            &[],
+            500,
+            1000.0,
+        )
+        .unwrap();
+        let rows = run_rows(
+            &denoiser,
+            &decoder,
+            &FeatureScales::default(),
+            &Schedule::default(),
+            &clouds,
+            &opts,
+            &specs,
+            &mut |_, _| {},
+        )
+        .unwrap();
+        assert_eq!(rows.len(), 5);
+        assert_eq!(rows[0].guidance, None);
+        assert_eq!(rows[4].variant, "pen n_g=1000 w=8");
+        let g = rows[4].guidance.unwrap();
+        assert_eq!((g.w_pc, g.w_pen, g.w_mob, g.steps), (0.0, 8.0, 0.0, 1000));
+        assert!(rows.iter().all(|r| r.samples + r.diverged == 1));
+    }
+
+    #[test]
+    fn sweeps_cover_the_grid_and_refuse_bad_values() {
+        let rows = sweep_rows(
+            SweepKind::Pc,
+            &[false, true],
+            &[100, 500],
+            &[0.1, 1.0, 10.0],
+            &[],
+            500,
+            1000.0,
+        )
+        .unwrap();
+        assert_eq!(rows.len(), 2 * (1 + 2 * 3));
+        assert!(rows[..7].iter().all(|r| !r.category_aware));
+        let w: Vec<f64> = rows[1..4]
+            .iter()
+            .map(|r| r.guidance.unwrap().w_pc)
+            .collect();
+        assert!((w[0] - 4.5).abs() < 1e-12 && w[1] == 45.0 && (w[2] - 450.0).abs() < 1e-9);
+        assert_eq!(rows[1].label, "pc n_g=100 w=4.5");
+        assert_eq!(short(0.3 * 45.0), "13.5");
+        let tau = sweep_rows(
+            SweepKind::Tau,
+            &[false],
+            &[],
+            &[],
+            &[100.0, 1000.0],
+            500,
+            1.0,
+        )
+        .unwrap();
+        let t: Vec<(f64, f64, usize)> = tau[1..]
+            .iter()
+            .map(|r| r.guidance.map(|g| (g.tau, g.w_pc, g.steps)).unwrap())
+            .collect();
+        assert_eq!(t, [(100.0, 45.0, 500), (1000.0, 45.0, 500)]);
+        let e = sweep_rows(SweepKind::Mob, &[false], &[500], &[0.0], &[], 500, 1.0)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("sweep_weights") && e.contains('0'), "{e}");
+        let e = SweepKind::parse("penn").unwrap_err().to_string();
+        assert!(
+            e.contains("sweep") && e.contains("penn") && e.contains("tau"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -299,6 +299,9 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
     }
     let (hits, tries) = per_cat.iter().fold((0, 0), |s, e| (s.0 + e.1, s.1 + e.2));
     let cat_acc = (tries > 0).then(|| hits as f64 / tries as f64);
+    // The ceiling of that metric: how often a test object's nearest other test object shares
+    // its category.
+    let ref_acc = physnap::eval::generative::loo_label_accuracy(&d_rr, &ref_cats);
 
     println!(
         "generative evaluation ({} order) of {}",
@@ -346,6 +349,12 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
             println!("    {c:<18} {h}/{t}");
         }
     }
+    if let Some(acc) = ref_acc {
+        println!(
+            "  ceiling: a test object's nearest other test object has its category {:.1}% of the time",
+            100.0 * acc
+        );
+    }
     let wall = started.elapsed().as_secs_f64();
     println!("  time: sampling+meshing {sampling_s:.0} s, ID {id_s:.0} s, total {wall:.0} s");
 
@@ -370,6 +379,7 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
         "conditional": {
             "per_category": a.per_category,
             "accuracy": cat_acc,
+            "reference_loo_accuracy": ref_acc,
             "categories": per_cat.iter().map(|(c, h, t)| json!({"category": c, "hits": h, "samples": t})).collect::<Vec<_>>(),
         },
         "seconds": { "sampling": sampling_s, "id": id_s, "total": wall },

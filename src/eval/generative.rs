@@ -512,10 +512,45 @@ pub fn invalid_reason(obj: &ArticulatedObject, meshes: &[TriMesh]) -> Option<Str
     None
 }
 
+/// Leave-one-out nearest-neighbour label accuracy over a symmetric distance matrix: for each
+/// object, does its nearest *other* object carry the same label? Run on the reference set
+/// itself, it is the ceiling of the category-accuracy metric (a conditioned sample can only be
+/// classified as well as the references separate their categories). None below two objects.
+pub fn loo_label_accuracy(d: &[Vec<f64>], labels: &[String]) -> Option<f64> {
+    let n = labels.len();
+    if n < 2 || d.len() != n {
+        return None;
+    }
+    let hits = (0..n)
+        .filter(|&i| {
+            let nn = (0..n)
+                .filter(|&j| j != i)
+                .min_by(|&a, &b| d[i][a].total_cmp(&d[i][b]))
+                .expect("n >= 2");
+            labels[nn] == labels[i]
+        })
+        .count();
+    Some(hits as f64 / n as f64)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::mesh::{MeshingOptions, mesh_parts};
+
+    #[test]
+    fn leave_one_out_accuracy_uses_the_nearest_other_object() {
+        // Objects 0,1 (label a) close together, 2,3 (label b) close together; 4 (label a) is
+        // nearest to 3.
+        let pos = [0.0, 0.1, 5.0, 5.2, 5.5];
+        let d: Vec<Vec<f64>> = pos
+            .iter()
+            .map(|x: &f64| pos.iter().map(|y| (x - y).abs()).collect())
+            .collect();
+        let labels: Vec<String> = ["a", "a", "b", "b", "a"].map(String::from).to_vec();
+        assert_eq!(loo_label_accuracy(&d, &labels), Some(0.8));
+        assert_eq!(loo_label_accuracy(&d[..1], &labels[..1]), None);
+    }
 
     fn cloud(pts: &[[f32; 3]]) -> Cloud {
         Cloud::new(pts)

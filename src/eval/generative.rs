@@ -541,7 +541,7 @@ mod tests {
     #[test]
     fn leave_one_out_accuracy_uses_the_nearest_other_object() {
         // Objects 0,1 (label a) close together, 2,3 (label b) close together; 4 (label a) is
-        // nearest to 3.
+        // nearest to 3 (label b): 4 of 5 hits.
         let pos = [0.0, 0.1, 5.0, 5.2, 5.5];
         let d: Vec<Vec<f64>> = pos
             .iter()

@@ -516,7 +516,12 @@ mod tests {
         assert_eq!(s.guidance_max_step, Some(DEFAULT_MAX_STEP));
         assert_eq!((s.w_pc, s.w_pen, s.w_mob), (15.0, 2.0 / 3.0, 2.0 / 3.0));
         assert!(s.guided());
-        assert_eq!(s.guidance_threshold(1000), 500);
+        // Exactly the last 100 of the 200 strided times are guided, as with the CLI's
+        // `--guidance-steps 500` (t < 500).
+        let th = s.guidance_threshold(1000);
+        let times = timesteps(1000, 200);
+        assert_eq!(times.iter().filter(|&&t| t < th).count(), 100);
+        assert_eq!(times.iter().filter(|&&t| t < 500).count(), 100);
         assert_eq!(s.points.len(), 16);
         // The paper's sampler is one field away.
         let paper = JobInput {
@@ -529,6 +534,7 @@ mod tests {
             (s.steps, s.n_g, s.engine_sampler()),
             (1000, 500, Sampler::Ddpm)
         );
+        assert_eq!(s.guidance_threshold(1000), 500);
     }
 
     #[test]

@@ -32,6 +32,16 @@ struct Cli {
     #[arg(long, env = "PHYSNAP_LOG", default_value = "info", global = true)]
     log: String,
 
+    /// Seconds between progress log lines when stderr is not a terminal (logs, CI, containers),
+    /// where the progress bar is hidden; 0 turns them off.
+    #[arg(
+        long,
+        env = "PHYSNAP_PROGRESS_INTERVAL",
+        default_value_t = 30.0,
+        global = true
+    )]
+    progress_interval: f64,
+
     #[command(subcommand)]
     command: Command,
 }
@@ -477,15 +487,47 @@ struct ExportArgs {
     velocity: f64,
 }
 
-/// A progress bar on stderr (hidden when stderr is not a terminal).
 /// `--guidance-max-step` to the engine's option: 0 turns the clamp off (the paper's raw step);
 /// other values, negative ones included, go to the engine, which validates them.
 fn max_step(flag: f64) -> Option<f64> {
     (flag != 0.0).then_some(flag)
 }
 
+/// `--progress-interval`, set once in `main`.
+static PROGRESS_INTERVAL: std::sync::OnceLock<f64> = std::sync::OnceLock::new();
+
+/// A progress bar on stderr. indicatif hides it when stderr is not a terminal; then a watcher
+/// thread logs "what: pos/len, rate, eta" every `--progress-interval` seconds instead, so a long
+/// run under nohup, CI or docker still shows that it moves. The watcher holds only a weak
+/// reference and stops when the bar is finished or dropped.
 fn progress_bar(total: usize, what: &str) -> indicatif::ProgressBar {
     let pb = indicatif::ProgressBar::new(total as u64);
+    let every = PROGRESS_INTERVAL.get().copied().unwrap_or(30.0);
+    if pb.is_hidden() && every > 0.0 {
+        let weak = pb.downgrade();
+        let what = what.to_string();
+        let spawned = std::thread::Builder::new()
+            .name("progress-log".into())
+            .spawn(move || {
+                loop {
+                    std::thread::sleep(std::time::Duration::from_secs_f64(every));
+                    let Some(pb) = weak.upgrade() else { break };
+                    if pb.is_finished() {
+                        break;
+                    }
+                    let (pos, len) = (pb.position(), pb.length().unwrap_or(0));
+                    tracing::info!(
+                        "{what}: {pos}/{len} ({:.1}%), {:.2}/s, eta {}s",
+                        100.0 * pos as f64 / len.max(1) as f64,
+                        pb.per_sec(),
+                        pb.eta().as_secs()
+                    );
+                }
+            });
+        if let Err(e) = spawned {
+            tracing::warn!("no progress logging: {e}");
+        }
+    }
     pb.set_style(
         indicatif::ProgressStyle::with_template(
             "{msg:>10} [{bar:40}] {pos}/{len} {per_sec} eta {eta} {prefix}",
@@ -504,7 +546,16 @@ fn main() -> ExitCode {
     tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .init();
+    if !(cli.progress_interval.is_finite() && cli.progress_interval >= 0.0) {
+        eprintln!(
+            "error: --progress-interval must be finite and >= 0 seconds (0: off), got {}",
+            cli.progress_interval
+        );
+        return ExitCode::FAILURE;
+    }
+    let _ = PROGRESS_INTERVAL.set(cli.progress_interval);
     match run(cli.command) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

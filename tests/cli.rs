@@ -241,6 +241,27 @@ fn missing_file_is_reported() {
 }
 
 #[test]
+fn negative_progress_interval_names_flag_limit_and_value() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let args = [
+        "export",
+        "--object",
+        EXAMPLE,
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    let o = physnap(&args, &[("PHYSNAP_PROGRESS_INTERVAL", "-1")]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("--progress-interval must be finite and >= 0 seconds (0: off), got -1"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!out.exists(), "nothing is written after a refused flag");
+}
+
+#[test]
 fn eval_guided_refuses_unknown_variants_and_empty_cloud_folders() {
     let dir = tempfile::tempdir().unwrap();
     let clouds = dir.path().join("clouds");

@@ -64,7 +64,13 @@ fn synth_import_train_generate() {
         "--surface",
         "64",
     ]);
-    ok(&[
+    // Under `output()` stderr is not a terminal: the bar is hidden and progress comes as log
+    // lines every --progress-interval seconds instead.
+    let o = physnap(&[
+        "--log",
+        "info",
+        "--progress-interval",
+        "0.02",
         "train",
         "shape",
         "--data",
@@ -76,6 +82,13 @@ fn synth_import_train_generate() {
         "--batch-parts",
         "4",
     ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "train shape failed:\n{err}");
+    assert!(
+        err.lines()
+            .any(|l| l.contains("shape: ") && l.contains("/6 (")),
+        "no progress lines on a non-terminal stderr:\n{err}"
+    );
     for f in [
         "shape_prior.safetensors",
         "codebook.npy",

@@ -121,9 +121,10 @@ pub fn diffusion(a: DiffusionArgs) -> anyhow::Result<()> {
     };
     std::fs::write(a.out.join("manifest.json"), manifest_to_string(&manifest))?;
     println!(
-        "trained the denoiser for {} steps in {:.0} s (loss ema {:.4}); weights + manifest in {}",
+        "trained the denoiser for {} steps in {:.0} s ({:.0} s including resumed runs; loss ema {:.4}); weights + manifest in {}",
         report.steps,
         report.wall_seconds,
+        report.wall_seconds_total,
         report.final_loss,
         a.out.display()
     );

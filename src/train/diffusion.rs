@@ -34,7 +34,8 @@
 //! Reproducibility and resume: step s draws everything from `Rng::fork(seed, s)`, so a resumed
 //! run sees exactly the batches and noise of an uninterrupted one. Checkpoints
 //! (`denoiser.safetensors`, `denoiser_raw.safetensors` + `checkpoint.json`) are written every
-//! `checkpoint_every` steps and at the end; `resume` continues from them. Adam's moment
+//! `checkpoint_every` steps and at the end; `resume` continues from them (and carries the loss
+//! EMA and the cumulative wall time, `wall_seconds_total`, across the runs). Adam's moment
 //! estimates are not checkpointed and restart from zero on resume (documented deviation; the
 //! loss recovers within a few hundred steps). A checkpoint without a raw file (written before
 //! the EMA existed) resumes from `denoiser.safetensors` and starts the EMA there.
@@ -307,6 +308,8 @@ pub struct DiffusionTrainReport {
     pub steps: usize,
     /// Wall time of this run (seconds).
     pub wall_seconds: f64,
+    /// Wall time of this run and every run it resumed, as far as their checkpoints recorded it.
+    pub wall_seconds_total: f64,
     /// Final loss EMA.
     pub final_loss: f64,
     /// The weights file.
@@ -386,9 +389,14 @@ pub fn train_diffusion(
     let mut start = 0usize;
     let mut ema_steps = 0usize;
     let mut shadow: Option<Vec<Vec<f32>>> = None;
+    // Wall time and loss EMA of the runs this one resumes (absent in older checkpoints).
+    let mut prior_wall = 0.0f64;
+    let mut ema = f64::NAN;
     if resume && ckpt_path.is_file() {
         let ck = read_json(&ckpt_path)?;
         start = ck["step"].as_u64().unwrap_or(0) as usize;
+        prior_wall = ck["wall_seconds_total"].as_f64().unwrap_or(0.0);
+        ema = ck["loss_ema"].as_f64().unwrap_or(f64::NAN);
         match ck["raw_sha256"].as_str() {
             Some(raw_sha) if raw_path.is_file() => {
                 weights::load(&mut model, &raw_path, Some(raw_sha))?;
@@ -408,7 +416,6 @@ pub fn train_diffusion(
     }
     let mut optim = AdamConfig::new().init();
     let t0 = Instant::now();
-    let mut ema = f64::NAN;
     let no_category = cfg.model.categories;
     let bsz = cfg.batch_objects * cfg.noise_levels;
     let mut sha = String::new();
@@ -512,11 +519,13 @@ pub fn train_diffusion(
                     let averaged = model.valid().map(&mut Install { shadow, next: 0 });
                     sha = weights::save(&averaged, &weights_path)?;
                     json!({ "step": step + 1, "sha256": sha, "raw_sha256": raw_sha,
-                            "ema_steps": ema_steps, "loss_ema": ema })
+                            "ema_steps": ema_steps, "loss_ema": ema,
+                            "wall_seconds_total": prior_wall + t0.elapsed().as_secs_f64() })
                 }
                 None => {
                     sha = weights::save(&model.valid(), &weights_path)?;
-                    json!({ "step": step + 1, "sha256": sha, "loss_ema": ema })
+                    json!({ "step": step + 1, "sha256": sha, "loss_ema": ema,
+                            "wall_seconds_total": prior_wall + t0.elapsed().as_secs_f64() })
                 }
             };
             std::fs::write(&ckpt_path, ck.to_string())
@@ -531,7 +540,8 @@ pub fn train_diffusion(
     }
     let wall = t0.elapsed().as_secs_f64();
     let summary = json!({
-        "steps": cfg.steps, "resumed_from": start, "wall_seconds": wall, "final_loss_ema": ema,
+        "steps": cfg.steps, "resumed_from": start, "wall_seconds": wall,
+        "wall_seconds_total": prior_wall + wall, "final_loss_ema": ema,
         "batch_objects": cfg.batch_objects, "noise_levels": cfg.noise_levels, "lr": cfg.lr,
         "lr_decay_start": cfg.lr_decay_start, "lr_final_factor": cfg.lr_final_factor,
         "ema_decay": cfg.ema_decay, "ema_steps": ema_steps,
@@ -548,6 +558,7 @@ pub fn train_diffusion(
     Ok(DiffusionTrainReport {
         steps: cfg.steps,
         wall_seconds: wall,
+        wall_seconds_total: prior_wall + wall,
         final_loss: ema,
         weights: weights_path,
         sha256: sha,
@@ -640,6 +651,16 @@ mod tests {
         .unwrap();
         assert_eq!(steps.first(), Some(&61));
         assert_eq!(steps.last(), Some(&80));
+        // The report and the checkpoint count the wall time of both runs.
+        let summary: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(dir.path().join("diffusion_train.json")).unwrap(),
+        )
+        .unwrap();
+        let (this, total) = (
+            summary["wall_seconds"].as_f64().unwrap(),
+            summary["wall_seconds_total"].as_f64().unwrap(),
+        );
+        assert!(total >= this + 0.5 * report.wall_seconds, "{this} {total}");
     }
 
     #[test]

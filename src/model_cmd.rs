@@ -444,7 +444,7 @@ fn read_clouds(dir: &Path, max: usize) -> anyhow::Result<Vec<physnap::eval::guid
 pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
     use physnap::eval::generative::IdOptions;
     use physnap::eval::guided::{
-        SweepKind, TableOptions, guided_table, run_rows, sweep_rows, table_markdown,
+        SweepKind, TableOptions, run_rows, sweep_rows, table_markdown, table_rows,
     };
     if a.samples_per_cloud == 0 {
         bail!("invalid --samples-per-cloud: 0 (must be at least 1)");
@@ -513,9 +513,8 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
     if a.category_aware == "yes" && !conditional {
         bail!("invalid --category-aware yes: the weights' denoiser has no category input");
     }
-    let blocks = opts.category_aware.len();
     let specs = match sweep {
-        Some(kind) => Some(sweep_rows(
+        Some(kind) => sweep_rows(
             kind,
             &opts.category_aware,
             &a.sweep_ng,
@@ -523,42 +522,24 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
             &a.sweep_tau,
             a.sampling.guidance_steps,
             a.sampling.tau,
-        )?),
-        None => None,
-    };
-    let rows_planned = match &specs {
-        Some(s) => s.len(),
-        None if a.variants.is_empty() => 5 * blocks,
-        None => a.variants.len() * blocks,
+        )?,
+        None => table_rows(&opts)?,
     };
     let pb = super::progress_bar(
-        rows_planned * clouds.len() * a.samples_per_cloud,
+        specs.len() * clouds.len() * a.samples_per_cloud,
         "eval guided",
     );
-    let scales = &models.manifest.feature_scales;
-    let schedule = Schedule::default();
     let on_sample = &mut |done: usize, _: usize| pb.set_position(done as u64);
-    let rows = match &specs {
-        Some(specs) => run_rows(
-            &models.denoiser,
-            &decoder,
-            scales,
-            &schedule,
-            &clouds,
-            &opts,
-            specs,
-            on_sample,
-        )?,
-        None => guided_table(
-            &models.denoiser,
-            &decoder,
-            scales,
-            &schedule,
-            &clouds,
-            &opts,
-            on_sample,
-        )?,
-    };
+    let rows = run_rows(
+        &models.denoiser,
+        &decoder,
+        &models.manifest.feature_scales,
+        &Schedule::default(),
+        &clouds,
+        &opts,
+        &specs,
+        on_sample,
+    )?;
     pb.finish_and_clear();
     let stem = match sweep {
         Some(kind) => format!("sweep_{}", kind.name()),

@@ -315,6 +315,16 @@ pub fn guided_table(
     opts: &TableOptions,
     on_sample: &mut dyn FnMut(usize, usize),
 ) -> Result<Vec<TableRow>, EngineError> {
+    let specs = table_rows(opts)?;
+    run_rows(
+        denoiser, decoder, scales, schedule, clouds, opts, &specs, on_sample,
+    )
+}
+
+/// The rows of Table 1 that `opts` selects: its category blocks × its variants (all five when
+/// `opts.variants` is empty) with the paper's guidance settings. Unknown variant names are
+/// refused, naming the allowed ones.
+pub fn table_rows(opts: &TableOptions) -> Result<Vec<RowSpec>, EngineError> {
     let variants: Vec<Variant> = VARIANTS
         .into_iter()
         .filter(|v| opts.variants.is_empty() || opts.variants.iter().any(|n| n == v.name))
@@ -343,9 +353,7 @@ pub fn guided_table(
             })
         })
         .collect();
-    run_rows(
-        denoiser, decoder, scales, schedule, clouds, opts, &specs, on_sample,
-    )
+    Ok(specs)
 }
 
 /// Guidance of one row: weights, n_g (diffusion time t < steps is guided) and τ.

@@ -562,7 +562,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         "samples_per_cloud": a.samples_per_cloud,
         "command": std::env::args().collect::<Vec<_>>().join(" "),
         "seed": a.seed, "guidance_steps": a.sampling.guidance_steps, "tau": a.sampling.tau,
-        "guidance_max_step": super::max_step(a.sampling.guidance_max_step),
+        "guidance_max_step": opts.max_step,
         "sampler": a.sampling.sampler, "steps": a.sampling.steps, "eta": a.sampling.eta,
         "statistic": "E_* and D_pc: median over all samples; MMD and 1-NNA: per cloud (its samples vs its references), median over clouds",
         "references": a.data.as_ref().map(|d| serde_json::json!({

@@ -66,18 +66,23 @@ pub struct SubmitArgs {
     /// Temperature τ of the point-to-part soft assignment (server default 1000).
     #[arg(long, env = "PHYSNAP_TAU")]
     tau: Option<f64>,
-    /// Clamp each guidance-gradient entry to ±this (a deviation from the paper; off by default).
+    /// Clamp each guidance-gradient entry to ±this (a deviation from the paper; server default
+    /// 0.05, 0 = off).
     #[arg(long, env = "PHYSNAP_GUIDANCE_MAX_STEP")]
     guidance_max_step: Option<f64>,
-    /// Reverse-step rule: ddpm (server default) or ddim.
+    /// Reverse-step rule: ddim (server default) or ddpm (the paper's, with --steps 1000).
     #[arg(long, env = "PHYSNAP_SAMPLER", value_parser = ["ddpm", "ddim"])]
     sampler: Option<String>,
     /// DDIM noise level η in [0, 1] (ddim only).
     #[arg(long, env = "PHYSNAP_DDIM_ETA")]
     eta: Option<f64>,
-    /// Reverse steps, 1-1000 (server default 1000).
+    /// Reverse steps, 1-1000 (server default 200).
     #[arg(long, env = "PHYSNAP_STEPS")]
     steps: Option<u32>,
+    /// Codebook retrieval of part shapes: auto (server default: empty when the weights have a
+    /// codebook), off, empty or all.
+    #[arg(long, env = "PHYSNAP_RETRIEVAL", value_parser = ["auto", "off", "empty", "all"])]
+    retrieval: Option<String>,
     /// Idempotency key (a retry with the same key returns the same job).
     #[arg(long, env = "PHYSNAP_REQUEST_ID", default_value = "")]
     request_id: String,
@@ -154,6 +159,7 @@ pub fn submit(a: SubmitArgs) -> anyhow::Result<()> {
             sampler: a.sampler.clone().unwrap_or_default(),
             eta: a.eta,
             steps: a.steps,
+            retrieval: a.retrieval.clone().unwrap_or_default(),
             ..Default::default()
         };
         let job = cl

@@ -14,7 +14,7 @@ use serde_json::json;
 use physnap::data::categories::category_index;
 use physnap::data::dataset::load_object_meshes;
 use physnap::data::rng::Rng;
-use physnap::engine::generate::{GenerateRequest, Generated, generate as run_generate};
+use physnap::engine::generate::{GenerateRequest, Generated, Retrieval, generate as run_generate};
 use physnap::engine::schedule::Schedule;
 use physnap::eval::generative::{
     IdOptions, MetricOrder, StateClouds, distance_matrix, distribution_metrics, invalid_reason,
@@ -134,6 +134,7 @@ fn sample_set(
     samples: usize,
     seed: u64,
     resolution: usize,
+    retrieval: Retrieval,
     pb: &indicatif::ProgressBar,
 ) -> anyhow::Result<Vec<Generated>> {
     let decoder = LatentSdfDecoder::new(&models.shape_prior.decoder);
@@ -143,11 +144,13 @@ fn sample_set(
         category,
         category_name: category.map(|i| models.manifest.categories[i].clone()),
         meshing: MeshingOptions { resolution },
+        retrieval,
         ..Default::default()
     };
     Ok(run_generate(
         &models.denoiser,
         &decoder,
+        models.codebook.as_ref(),
         &models.manifest.feature_scales,
         &Schedule::default(),
         &req,
@@ -207,14 +210,31 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
         } else {
             0
         };
+    let retrieval = super::model_cmd::retrieval_mode(&a.retrieval, &models)?;
     let pb = super::progress_bar(total_samples, "sample");
-    let uncond = sample_set(&models, None, a.samples, a.seed, a.resolution, &pb)?;
+    let uncond = sample_set(
+        &models,
+        None,
+        a.samples,
+        a.seed,
+        a.resolution,
+        retrieval,
+        &pb,
+    )?;
     let mut cond: Vec<(String, Generated)> = Vec::new();
     if conditional {
         for (ci, c) in cats.iter().enumerate() {
             let idx = category_index(c).with_context(|| format!("unknown category {c:?}"))?;
             let seed = a.seed + 1_000_000 * (ci as u64 + 1);
-            for g in sample_set(&models, Some(idx), a.per_category, seed, a.resolution, &pb)? {
+            for g in sample_set(
+                &models,
+                Some(idx),
+                a.per_category,
+                seed,
+                a.resolution,
+                retrieval,
+                &pb,
+            )? {
                 cond.push((c.clone(), g));
             }
         }
@@ -232,6 +252,9 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
         .collect();
     reasons.sort();
     let valid_rate = valid.len() as f64 / uncond.len() as f64;
+    // Retrieval: how many unconditional samples / parts needed a codebook shape.
+    let retrieved_samples = uncond.iter().filter(|g| !g.retrieved.is_empty()).count();
+    let retrieved_parts: usize = uncond.iter().map(|g| g.retrieved.len()).sum();
     let clouds = |gs: &[&Generated], salt: u64| -> anyhow::Result<Vec<StateClouds>> {
         Ok(gs
             .par_iter()
@@ -334,6 +357,12 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
             )
         }
     );
+    if retrieval != Retrieval::Off {
+        println!(
+            "  retrieval {}: {retrieved_parts} parts of {retrieved_samples} samples took their nearest codebook shape",
+            retrieval.as_str()
+        );
+    }
     if let Some(m) = metrics {
         println!(
             "  MMD {:.5}   COV {:.3}   1-NNA {:.3}",
@@ -367,7 +396,10 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
         "references": refs.len(),
         "id": { "states": a.states, "points": a.points },
         "meshing_resolution": a.resolution,
+        "retrieval": retrieval.as_str(),
         "unconditional": {
+            "retrieved_samples": retrieved_samples,
+            "retrieved_parts": retrieved_parts,
             "samples": uncond.len(),
             "valid": valid.len(),
             "valid_rate": valid_rate,

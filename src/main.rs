@@ -127,14 +127,35 @@ struct EvalGenerativeArgs {
     /// Record the report under `metrics` in the weights' manifest.json.
     #[arg(long, env = "PHYSNAP_EVAL_WRITE_MANIFEST")]
     write_manifest: bool,
+    /// Replace part shapes by their nearest training code of the weights' codebook: auto
+    /// (empty shapes when the weights have a codebook, else off), off, empty (shapes that mesh
+    /// empty), all (every latent shape: NAP's retrieval variant).
+    #[arg(long, env = "PHYSNAP_RETRIEVAL", default_value = "auto", value_parser = ["auto", "off", "empty", "all"])]
+    retrieval: String,
 }
 
 #[derive(Subcommand, Debug)]
 enum TrainCommand {
     /// Train the part-shape auto-encoder on an imported data set; writes weights + codebook.
     Shape(ShapeArgs),
-    /// Train the articulation denoiser; writes denoiser weights, the shape prior and manifest.json.
+    /// Train the articulation denoiser; writes denoiser weights, the shape prior, the retrieval
+    /// codebook and manifest.json.
     Diffusion(DiffusionArgs),
+    /// (Re)build the retrieval codebook of a weights directory from a `train shape` output.
+    Codebook(CodebookArgs),
+}
+
+#[derive(Args, Debug)]
+struct CodebookArgs {
+    /// Shape prior directory (output of `physnap train shape`: weights + codebook.npy/json).
+    #[arg(long, env = "PHYSNAP_SHAPE")]
+    shape: PathBuf,
+    /// Weights directory to add codebook.safetensors to (its manifest.json is updated).
+    #[arg(long, env = "PHYSNAP_WEIGHTS")]
+    weights: PathBuf,
+    /// Meshing resolution of the check that keeps only codes that decode non-empty.
+    #[arg(long, env = "PHYSNAP_CODEBOOK_CHECK_RESOLUTION", default_value_t = physnap::train::codebook::DEFAULT_CHECK_RESOLUTION)]
+    check_resolution: usize,
 }
 
 #[derive(Args, Debug)]
@@ -269,6 +290,11 @@ struct SamplingArgs {
     /// DDIM noise level η in [0, 1].
     #[arg(long, env = "PHYSNAP_DDIM_ETA", default_value_t = 0.0)]
     eta: f64,
+    /// Replace part shapes by their nearest training code of the weights' codebook: auto
+    /// (empty shapes when the weights have a codebook, else off), off, empty (shapes that mesh
+    /// empty), all (every latent shape: NAP's retrieval variant).
+    #[arg(long, env = "PHYSNAP_RETRIEVAL", default_value = "auto", value_parser = ["auto", "off", "empty", "all"])]
+    retrieval: String,
 }
 
 #[derive(Args, Debug)]
@@ -572,6 +598,7 @@ fn run(command: Command) -> anyhow::Result<()> {
         Command::Train { command } => match command {
             TrainCommand::Shape(a) => model_cmd::shape(a),
             TrainCommand::Diffusion(a) => model_cmd::diffusion(a),
+            TrainCommand::Codebook(a) => model_cmd::codebook(a),
         },
         Command::Generate(a) => model_cmd::generate(a),
         Command::Serve(a) => serve_cmd::serve(a),

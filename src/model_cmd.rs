@@ -7,22 +7,29 @@ use anyhow::{Context, bail};
 
 use physnap::data::categories::category_index;
 use physnap::engine::EngineError;
-use physnap::engine::generate::{GenerateRequest, generate_with as run_generate};
+use physnap::engine::generate::{
+    GenerateRequest, PartShapes, Retrieval, generate_with as run_generate,
+};
 use physnap::engine::guidance::{GuidanceOptions, SdfField, Terms};
 use physnap::engine::sample::Sampler;
 use physnap::engine::schedule::Schedule;
 use physnap::eval::guided::metrics as guided_metrics;
 use physnap::export::{ExportOptions, export_dir};
-use physnap::io::manifest::{Entry, Manifest, load_models, to_string as manifest_to_string};
+use physnap::io::manifest::{
+    Entry, LoadedModels, Manifest, load_models, to_string as manifest_to_string,
+};
 use physnap::mesh::MeshingOptions;
 use physnap::model::denoiser::DenoiserConfig;
 use physnap::model::shape_prior::LatentSdfDecoder;
 use physnap::model::weights::sha256_hex;
 use physnap::pointcloud::{Limits, PointCloud};
+use physnap::train::codebook::{
+    CODEBOOK_WEIGHTS_FILE, CodebookReport, DEFAULT_CHECK_RESOLUTION, build_codebook,
+};
 use physnap::train::diffusion::{DiffusionTrainConfig, load_data, train_diffusion};
 use physnap::train::shape::{ShapeTrainConfig, read_model_config, train_shape};
 
-use super::{DiffusionArgs, EvalGuidedArgs, GenerateArgs, ShapeArgs};
+use super::{CodebookArgs, DiffusionArgs, EvalGuidedArgs, GenerateArgs, ShapeArgs};
 
 pub fn shape(a: ShapeArgs) -> anyhow::Result<()> {
     let defaults = ShapeTrainConfig::default();
@@ -117,9 +124,16 @@ pub fn diffusion(a: DiffusionArgs) -> anyhow::Result<()> {
             "shape": read(&a.shape.join("shape_train.json")),
             "diffusion": read(&a.out.join("diffusion_train.json")),
         }),
+        codebook: None,
         metrics: serde_json::Value::Null,
     };
     std::fs::write(a.out.join("manifest.json"), manifest_to_string(&manifest))?;
+    // Every new weights directory gets its retrieval codebook (needs the manifest above). The
+    // weights are usable without one, so a codebook that cannot be built is a warning here
+    // (`physnap train codebook` reports it as an error).
+    if let Err(e) = write_codebook(&a.shape, &a.out, DEFAULT_CHECK_RESOLUTION) {
+        eprintln!("warning: weights written without a retrieval codebook: {e:#}");
+    }
     println!(
         "trained the denoiser for {} steps in {:.0} s ({:.0} s including resumed runs; loss ema {:.4}); weights + manifest in {}",
         report.steps,
@@ -129,6 +143,49 @@ pub fn diffusion(a: DiffusionArgs) -> anyhow::Result<()> {
         a.out.display()
     );
     Ok(())
+}
+
+pub fn codebook(a: CodebookArgs) -> anyhow::Result<()> {
+    write_codebook(&a.shape, &a.weights, a.check_resolution)?;
+    Ok(())
+}
+
+/// Build and register the retrieval codebook of `weights` (with a progress bar).
+fn write_codebook(shape: &Path, weights: &Path, check: usize) -> anyhow::Result<CodebookReport> {
+    let pb = super::progress_bar(0, "codebook");
+    let report = build_codebook(shape, weights, check, &mut |done, total| {
+        pb.set_length(total as u64);
+        pb.set_position(done as u64);
+    })?;
+    pb.finish_and_clear();
+    println!(
+        "codebook: {} of {} training codes decode non-empty (checked at {check}³) in {:.0} s; {} in {}",
+        report.rows,
+        report.candidates,
+        report.seconds,
+        CODEBOOK_WEIGHTS_FILE,
+        weights.display()
+    );
+    Ok(report)
+}
+
+/// The `--retrieval` flag against the loaded weights: `auto` is `empty` with a codebook and
+/// `off` without one; `empty` / `all` without a codebook are refused.
+pub fn retrieval_mode(flag: &str, models: &LoadedModels) -> anyhow::Result<Retrieval> {
+    let has = models.codebook.is_some();
+    match (flag, Retrieval::parse(flag)) {
+        ("auto", _) => Ok(if has {
+            Retrieval::Empty
+        } else {
+            Retrieval::Off
+        }),
+        (_, Some(Retrieval::Off)) => Ok(Retrieval::Off),
+        (_, Some(r)) if has => Ok(r),
+        (_, Some(_)) => bail!(
+            "invalid --retrieval {flag:?}: these weights have no codebook (manifest.json has no \"codebook\" entry); add one with `physnap train codebook` or use --retrieval off"
+        ),
+        (_, None) => bail!("invalid --retrieval {flag:?} (must be auto, off, empty or all)"),
+    }
 }
 
 pub fn generate(a: GenerateArgs) -> anyhow::Result<()> {
@@ -179,6 +236,7 @@ pub fn generate(a: GenerateArgs) -> anyhow::Result<()> {
         guidance: guidance.clone(),
         sampler,
         steps: a.sampling.steps,
+        retrieval: retrieval_mode(&a.sampling.retrieval, &models)?,
         ..Default::default()
     };
     req.meshing.validate()?;
@@ -198,10 +256,14 @@ pub fn generate(a: GenerateArgs) -> anyhow::Result<()> {
             samples: 1,
             ..req.clone()
         };
+        let shapes = PartShapes {
+            decoder: &decoder,
+            field: Some(&decoder as &dyn SdfField),
+            codebook: models.codebook.as_ref(),
+        };
         let r = run_generate(
             &models.denoiser,
-            &decoder,
-            Some(&decoder as &dyn SdfField),
+            &shapes,
             &models.manifest.feature_scales,
             &schedule,
             &one,
@@ -252,6 +314,13 @@ pub fn generate(a: GenerateArgs) -> anyhow::Result<()> {
             g.object.joints.len(),
             g.seed
         );
+        if !g.retrieved.is_empty() {
+            println!(
+                "  parts {:?} took their nearest codebook shape (--retrieval {})",
+                g.retrieved,
+                req.retrieval.as_str()
+            );
+        }
         if let Some(opts) = &guidance {
             let m = guided_metrics(&decoder, &g.raw, &g.meshes, &opts.points);
             rows.push((name, g.seed, m));
@@ -487,6 +556,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
             states: a.id_states,
             points: a.id_points,
         },
+        retrieval: retrieval_mode(&a.sampling.retrieval, &models)?,
     };
     opts.id.validate()?;
     let per_cloud = if a.refs_per_cloud == 0 {
@@ -533,6 +603,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
     let rows = run_rows(
         &models.denoiser,
         &decoder,
+        models.codebook.as_ref(),
         &models.manifest.feature_scales,
         &Schedule::default(),
         &clouds,

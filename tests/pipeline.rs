@@ -123,6 +123,20 @@ fn synth_import_train_generate() {
     assert_eq!(manifest["format"], "physnap.weights/v1");
     assert_eq!(manifest["categories"].as_array().unwrap().len(), 46);
     assert_eq!(manifest["denoiser"]["sha256"].as_str().unwrap().len(), 64);
+    // The retrieval codebook: training-split codes that mesh non-empty, sha256 in the manifest.
+    let cb = &manifest["codebook"];
+    let rows = cb["config"]["rows"].as_u64().unwrap() as usize;
+    assert!(
+        rows >= 1 && rows <= cb["config"]["candidates"].as_u64().unwrap() as usize,
+        "{cb}"
+    );
+    let codebook = physnap::model::codebook::Codebook::load(
+        &weights.join("codebook.safetensors"),
+        rows,
+        128,
+        cb["sha256"].as_str(),
+    )
+    .unwrap();
 
     // Generation is deterministic per seed and writes valid artefacts.
     let args = |out: &Path| -> Vec<String> {
@@ -163,6 +177,59 @@ fn synth_import_train_generate() {
         let report = common::gltf_validate(&gen1.join(k).join("model.glb"));
         assert_eq!(report["numErrors"], 0, "{report:#}");
     }
+
+    // --retrieval all: every latent part takes a codebook code, and says so.
+    let gen3 = root.path().join("gen3");
+    let out = ok(&[
+        "generate",
+        "--weights",
+        s(&weights),
+        "--seed",
+        "9",
+        "--resolution",
+        "16",
+        "--retrieval",
+        "all",
+        "--out",
+        s(&gen3),
+    ]);
+    assert!(out.contains("took their nearest codebook shape"), "{out}");
+    let j = std::fs::read_to_string(gen3.join("sample_000/object.json")).unwrap();
+    let obj = physnap::io::object_json::from_str(&j).unwrap();
+    for p in &obj.parts {
+        if let physnap::shape::PartShape::Latent(code) = &p.shape {
+            assert_eq!(
+                codebook.nearest(code).unwrap().1,
+                0.0,
+                "{} not retrieved",
+                p.name
+            );
+        }
+    }
+    // A codebook from another shape prior is refused: its codes would decode to other shapes.
+    let other = root.path().join("other_shape");
+    std::fs::create_dir_all(&other).unwrap();
+    for f in ["codebook.npy", "codebook.json", "shape_prior.safetensors"] {
+        std::fs::copy(shape.join(f), other.join(f)).unwrap();
+    }
+    let mut b = std::fs::read(other.join("shape_prior.safetensors")).unwrap();
+    let k = b.len() - 5;
+    b[k] ^= 0x10;
+    std::fs::write(other.join("shape_prior.safetensors"), b).unwrap();
+    let o = physnap(&[
+        "train",
+        "codebook",
+        "--shape",
+        s(&other),
+        "--weights",
+        s(&weights),
+    ]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        e.contains("shape_prior.safetensors") && e.contains("is not the shape prior of"),
+        "{e}"
+    );
 
     // Generated (latent) shapes render with the weights.
     let png = root.path().join("sample.png");

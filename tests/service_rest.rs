@@ -756,6 +756,8 @@ async fn guided_ddim_job_streams_losses_and_ranks_best_of_n() {
         (req["sampler"].as_str(), req["tau"].as_f64()),
         (Some("ddim"), Some(1000.0))
     );
+    // auto retrieval resolves to off for weights without a codebook.
+    assert_eq!(req["retrieval"], "off", "{req}");
     // Unset weights follow the paper's rule: w_pen = w_mob = 2 / 3.
     assert!(
         (req["w_pen"].as_f64().unwrap() - 2.0 / 3.0).abs() < 1e-12,
@@ -806,12 +808,14 @@ async fn guided_ddim_job_streams_losses_and_ranks_best_of_n() {
     assert_eq!(ranking["format"], "physnap.job_ranking/v1");
     assert_eq!(ranking["guided"], true);
     assert_eq!(ranking["guidance"]["n_g"], 10);
+    assert_eq!(ranking["retrieval"], "off");
     let rows = ranking["samples"].as_array().unwrap();
     assert_eq!(rows.len(), 2, "{ranking:#}");
     let d: Vec<f64> = rows.iter().map(|r| r["d_pc"].as_f64().unwrap()).collect();
     assert!(d[0] <= d[1], "{ranking:#}");
     assert_eq!(rows[0]["exported"], true);
     assert_eq!(rows[0]["diverged"], false);
+    assert_eq!(rows[0]["retrieved_parts"], json!([]));
     assert_eq!(ranking["best"], rows[0]["index"]);
     let seeds: Vec<u64> = rows.iter().map(|r| r["seed"].as_u64().unwrap()).collect();
     assert!(seeds.contains(&3) && seeds.contains(&4), "{seeds:?}");
@@ -848,6 +852,9 @@ async fn guidance_and_sampler_fields_are_validated() {
             "guidance_max_step",
             "-1",
         ),
+        (json!({"retrieval": "nearest"}), "retrieval", "\"nearest\""),
+        // The test weights have no codebook: only off / auto are possible.
+        (json!({"retrieval": "empty"}), "retrieval", "\"empty\""),
     ];
     for (extra, field, value) in cases {
         let mut b = json!({"points": points_json(32)});

@@ -39,6 +39,7 @@ fn shipped_weights_load_and_sample_deterministically() {
         generate(
             &models.denoiser,
             &decoder,
+            models.codebook.as_ref(),
             &models.manifest.feature_scales,
             &Schedule::default(),
             &req,

@@ -4,6 +4,12 @@
 //! articulated objects with meshes out"; this is that pipeline, transport-free. Sample `i` of a
 //! request is drawn with seed `seed + i` in its own batch-of-one run, so sample i is the same
 //! whether 1 or N samples were asked for.
+//!
+//! Retrieval (method.md §5.9, on codes): with [`Retrieval::Empty`] a part whose decoded shape
+//! meshes empty gets the nearest training code of the weights' codebook instead (1-NN,
+//! Euclidean, raw codes) and is meshed again; [`Retrieval::All`] does that for every latent
+//! part (NAP's retrieval variant). The replaced parts are listed in [`Generated::retrieved`];
+//! `raw` stays the graph the model produced, `object` carries the retrieved codes.
 
 use std::ops::ControlFlow;
 
@@ -12,10 +18,57 @@ use super::guidance::{GuidanceOptions, SdfField};
 use super::sample::{GuidanceContext, SampleRequest, Sampler, StepEvent, sample_guided};
 use super::schedule::Schedule;
 use crate::graph::{FeatureScales, GraphTensor, ProjectOptions, project};
-use crate::mesh::{MeshingOptions, TriMesh};
+use crate::mesh::{MeshingOptions, TriMesh, part_mesh};
+use crate::model::codebook::Codebook;
 use crate::model::denoiser::Denoiser;
 use crate::object::ArticulatedObject;
-use crate::shape::LatentDecoder;
+use crate::shape::{LatentDecoder, PartShape};
+
+/// Which generated part shapes are replaced by their nearest codebook code.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Retrieval {
+    /// Keep every decoded shape (the paper's SDF-extracted meshes).
+    #[default]
+    Off,
+    /// Replace only shapes that mesh empty.
+    Empty,
+    /// Replace every latent shape (NAP's retrieval variant).
+    All,
+}
+
+impl Retrieval {
+    /// Wire / flag name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Retrieval::Off => "off",
+            Retrieval::Empty => "empty",
+            Retrieval::All => "all",
+        }
+    }
+
+    /// Parse a wire / flag name (`off`, `empty`, `all`).
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "off" => Some(Retrieval::Off),
+            "empty" => Some(Retrieval::Empty),
+            "all" => Some(Retrieval::All),
+            _ => None,
+        }
+    }
+}
+
+/// The shape side of generation: the decoder that meshes latent parts, the SDF the guidance
+/// losses query, and the retrieval codebook.
+#[derive(Clone, Copy)]
+pub struct PartShapes<'a> {
+    /// Decodes latent codes for meshing.
+    pub decoder: &'a dyn LatentDecoder,
+    /// The part SDF of the guidance losses (the trained shape decoder, e.g. the same
+    /// `LatentSdfDecoder` as `decoder`); required when the request has active guidance.
+    pub field: Option<&'a dyn SdfField>,
+    /// Training codes for [`Retrieval`]; required unless it is `Off`.
+    pub codebook: Option<&'a Codebook>,
+}
 
 /// What to generate.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -39,6 +92,8 @@ pub struct GenerateRequest {
     pub sampler: Sampler,
     /// Reverse steps (0: all of the schedule).
     pub steps: usize,
+    /// Which part shapes are replaced by their nearest codebook code.
+    pub retrieval: Retrieval,
 }
 
 /// One generated sample.
@@ -54,6 +109,8 @@ pub struct Generated {
     pub object: ArticulatedObject,
     /// Part meshes, object frame at rest.
     pub meshes: Vec<TriMesh>,
+    /// Parts whose code was replaced by the nearest codebook code, ascending.
+    pub retrieved: Vec<usize>,
 }
 
 /// Progress of a generation request.
@@ -65,31 +122,44 @@ pub struct GenerateEvent {
     pub step: StepEvent,
 }
 
-/// Generate `req.samples` objects (unguided; a request with active guidance is refused with
-/// an error naming `guidance` — use [`generate_with`]).
+/// Generate `req.samples` objects without guidance (a request with active guidance is refused
+/// with an error naming `guidance` — use [`generate_with`] with a field).
 pub fn generate(
     denoiser: &Denoiser,
     decoder: &dyn LatentDecoder,
+    codebook: Option<&Codebook>,
     scales: &FeatureScales,
     schedule: &Schedule,
     req: &GenerateRequest,
     on_step: &mut dyn FnMut(&GenerateEvent) -> ControlFlow<String>,
 ) -> Result<Vec<Generated>, EngineError> {
-    generate_with(denoiser, decoder, None, scales, schedule, req, on_step)
+    let shapes = PartShapes {
+        decoder,
+        field: None,
+        codebook,
+    };
+    generate_with(denoiser, &shapes, scales, schedule, req, on_step)
 }
 
-/// Generate `req.samples` objects; `field` is the part SDF the guidance losses query (the
-/// trained shape decoder, e.g. the same `LatentSdfDecoder` as `decoder`), required when
-/// `req.guidance` has a positive weight.
+/// Generate `req.samples` objects; `shapes.field` is required when `req.guidance` has a
+/// positive weight, `shapes.codebook` when `req.retrieval` is not `Off`.
 pub fn generate_with(
     denoiser: &Denoiser,
-    decoder: &dyn LatentDecoder,
-    field: Option<&dyn SdfField>,
+    shapes: &PartShapes,
     scales: &FeatureScales,
     schedule: &Schedule,
     req: &GenerateRequest,
     on_step: &mut dyn FnMut(&GenerateEvent) -> ControlFlow<String>,
 ) -> Result<Vec<Generated>, EngineError> {
+    if req.retrieval != Retrieval::Off && shapes.codebook.is_none() {
+        return Err(EngineError::Invalid {
+            field: "retrieval".into(),
+            limit:
+                "\"off\" for weights without a codebook (manifest.json has no \"codebook\" entry)"
+                    .into(),
+            value: format!("{:?}", req.retrieval.as_str()),
+        });
+    }
     let device = crate::model::cpu();
     let mut out = Vec::with_capacity(req.samples);
     for i in 0..req.samples {
@@ -106,7 +176,7 @@ pub fn generate_with(
                 sampler: req.sampler,
                 steps: req.steps,
             },
-            field.map(|field| GuidanceContext { field, scales }),
+            shapes.field.map(|field| GuidanceContext { field, scales }),
             &device,
             &mut |s| {
                 on_step(&GenerateEvent {
@@ -116,7 +186,7 @@ pub fn generate_with(
             },
         )?;
         let raw = graphs[0].unscaled(scales);
-        let object = project(
+        let mut object = project(
             &raw,
             &ProjectOptions {
                 name: format!("sample_{i:03}"),
@@ -129,21 +199,234 @@ pub fn generate_with(
             limit: "a projectable graph".into(),
             value: e.to_string(),
         })?;
-        let meshes =
-            crate::mesh::mesh_parts(&object, Some(decoder), &req.meshing).map_err(|e| {
-                EngineError::Invalid {
-                    field: "meshing".into(),
-                    limit: "valid meshing options".into(),
-                    value: e.to_string(),
-                }
-            })?;
+        let mut meshes = crate::mesh::mesh_parts(&object, Some(shapes.decoder), &req.meshing)
+            .map_err(meshing_err)?;
+        let retrieved = match shapes.codebook {
+            Some(codebook) if req.retrieval != Retrieval::Off => retrieve_shapes(
+                &mut object,
+                &mut meshes,
+                shapes.decoder,
+                codebook,
+                req.retrieval,
+                &req.meshing,
+            )?,
+            _ => Vec::new(),
+        };
         out.push(Generated {
             index: i,
             seed,
             raw,
             object,
             meshes,
+            retrieved,
         });
     }
     Ok(out)
+}
+
+fn meshing_err(e: crate::error::CoreError) -> EngineError {
+    EngineError::Invalid {
+        field: "meshing".into(),
+        limit: "valid meshing options".into(),
+        value: e.to_string(),
+    }
+}
+
+/// Replace the latent shapes `mode` selects (empty meshes, or all) by their nearest codebook
+/// code and mesh those parts again; returns the replaced part indices. Parts with analytic
+/// shapes are left alone. `meshes[i]` must be part i's mesh.
+pub fn retrieve_shapes(
+    object: &mut ArticulatedObject,
+    meshes: &mut [TriMesh],
+    decoder: &dyn LatentDecoder,
+    codebook: &Codebook,
+    mode: Retrieval,
+    meshing: &MeshingOptions,
+) -> Result<Vec<usize>, EngineError> {
+    let mut replaced = Vec::new();
+    if mode == Retrieval::Off {
+        return Ok(replaced);
+    }
+    for (i, (part, mesh)) in object.parts.iter_mut().zip(meshes.iter_mut()).enumerate() {
+        let PartShape::Latent(code) = &part.shape else {
+            continue;
+        };
+        if mode == Retrieval::Empty && !mesh.triangles.is_empty() {
+            continue;
+        }
+        let Some((row, _)) = codebook.nearest(code) else {
+            return Err(EngineError::Invalid {
+                field: format!("part {i} shape code"),
+                limit: format!("{} values (the codebook's latent size)", codebook.latent()),
+                value: code.len().to_string(),
+            });
+        };
+        part.shape = PartShape::Latent(codebook.row(row).to_vec());
+        *mesh = part_mesh(part, Some(decoder), meshing).map_err(meshing_err)?;
+        replaced.push(i);
+    }
+    Ok(replaced)
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::Vector3;
+
+    use super::*;
+    use crate::object::Part;
+    use crate::shape::Sdf;
+
+    /// Decodes code `[r, …]` to a sphere of radius r in the normalised frame (r ≤ 0: empty).
+    struct Spheres;
+    impl LatentDecoder for Spheres {
+        fn sdf<'a>(&'a self, code: &'a [f32]) -> Box<dyn Sdf + 'a> {
+            let r = code[0];
+            Box::new(move |p: [f32; 3]| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() - r)
+        }
+    }
+
+    fn part(name: &str, shape: PartShape) -> Part {
+        Part {
+            name: name.into(),
+            half_extents: Vector3::repeat(0.1),
+            center: Vector3::zeros(),
+            shape,
+        }
+    }
+
+    fn object() -> ArticulatedObject {
+        let mut o = crate::fixtures::cabinet();
+        let n = o.parts.len();
+        assert!(
+            n >= 3,
+            "the fixture has a body and at least two moving parts"
+        );
+        o.parts[0] = part("base", PartShape::Latent(vec![-0.3, 0.0]));
+        o.parts[1] = part("door", PartShape::Latent(vec![0.2, 1.0]));
+        o.parts[2] = part("box", PartShape::Box);
+        o
+    }
+
+    #[test]
+    fn retrieval_replaces_empty_latent_shapes_with_the_nearest_code() {
+        let meshing = MeshingOptions { resolution: 16 };
+        // Row 1 is nearest to the empty base's code [-0.3, 0]; every row is non-empty.
+        let codebook = Codebook::new(2, vec![0.4, 3.0, 0.25, 0.1, 0.3, 1.1]).unwrap();
+        let mut obj = object();
+        let mut meshes = crate::mesh::mesh_parts(&obj, Some(&Spheres), &meshing).unwrap();
+        assert!(meshes[0].triangles.is_empty() && !meshes[1].triangles.is_empty());
+        let door = meshes[1].clone();
+        let got = retrieve_shapes(
+            &mut obj,
+            &mut meshes,
+            &Spheres,
+            &codebook,
+            Retrieval::Empty,
+            &meshing,
+        )
+        .unwrap();
+        assert_eq!(got, vec![0]);
+        assert_eq!(obj.parts[0].shape, PartShape::Latent(vec![0.25, 0.1]));
+        assert!(
+            !meshes[0].triangles.is_empty(),
+            "the base now has a surface"
+        );
+        assert_eq!(obj.parts[1].shape, PartShape::Latent(vec![0.2, 1.0]));
+        assert_eq!(meshes[1], door, "non-empty shapes are untouched");
+
+        // All: every latent part takes its nearest code; analytic parts are left alone.
+        let mut obj = object();
+        let mut meshes = crate::mesh::mesh_parts(&obj, Some(&Spheres), &meshing).unwrap();
+        let got = retrieve_shapes(
+            &mut obj,
+            &mut meshes,
+            &Spheres,
+            &codebook,
+            Retrieval::All,
+            &meshing,
+        )
+        .unwrap();
+        assert_eq!(got, vec![0, 1]);
+        assert_eq!(obj.parts[1].shape, PartShape::Latent(vec![0.3, 1.1]));
+        assert_eq!(obj.parts[2].shape, PartShape::Box);
+        // Off changes nothing.
+        let mut obj = object();
+        let before = obj.clone();
+        assert!(
+            retrieve_shapes(
+                &mut obj,
+                &mut meshes,
+                &Spheres,
+                &codebook,
+                Retrieval::Off,
+                &meshing
+            )
+            .unwrap()
+            .is_empty()
+        );
+        assert_eq!(obj, before);
+        // A code of the wrong length is refused, naming the part and the size.
+        let mut obj = object();
+        obj.parts[0].shape = PartShape::Latent(vec![-1.0]);
+        let mut meshes = crate::mesh::mesh_parts(&obj, Some(&Spheres), &meshing).unwrap();
+        let e = retrieve_shapes(
+            &mut obj,
+            &mut meshes,
+            &Spheres,
+            &codebook,
+            Retrieval::Empty,
+            &meshing,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("part 0 shape code") && e.contains("2 values"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn retrieval_without_a_codebook_is_refused_before_sampling() {
+        use crate::model::denoiser::DenoiserConfig;
+        let denoiser = Denoiser::new(
+            &DenoiserConfig {
+                width: 16,
+                layers: 1,
+                head_channels: 8,
+                node_head_hidden: vec![16],
+                edge_head_hidden: vec![16],
+                ..DenoiserConfig::default()
+            },
+            &crate::model::cpu(),
+        )
+        .unwrap();
+        let mut steps = 0;
+        let e = generate(
+            &denoiser,
+            &Spheres,
+            None,
+            &FeatureScales::default(),
+            &Schedule::default(),
+            &GenerateRequest {
+                samples: 1,
+                retrieval: Retrieval::Empty,
+                ..Default::default()
+            },
+            &mut |_| {
+                steps += 1;
+                ControlFlow::Continue(())
+            },
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("retrieval") && e.contains("\"empty\"") && e.contains("codebook"),
+            "{e}"
+        );
+        assert_eq!(steps, 0);
+        for r in [Retrieval::Off, Retrieval::Empty, Retrieval::All] {
+            assert_eq!(Retrieval::parse(r.as_str()), Some(r));
+        }
+        assert_eq!(Retrieval::parse("auto"), None);
+    }
 }

@@ -26,12 +26,13 @@ use std::ops::ControlFlow;
 use burn::tensor::{Tensor, TensorData};
 
 use crate::engine::EngineError;
-use crate::engine::generate::{GenerateRequest, generate_with};
+use crate::engine::generate::{GenerateRequest, PartShapes, Retrieval, generate_with};
 use crate::engine::guidance::{GuidanceOptions, Terms};
 use crate::engine::sample::Sampler;
 use crate::engine::schedule::Schedule;
 use crate::graph::FeatureScales;
 use crate::mesh::MeshingOptions;
+use crate::model::codebook::Codebook;
 use crate::model::denoiser::Denoiser;
 use crate::model::shape_prior::LatentSdfDecoder;
 
@@ -262,6 +263,8 @@ pub struct TableOptions {
     pub references: Vec<Vec<StateClouds>>,
     /// States and points of the instantiation distance.
     pub id: IdOptions,
+    /// Which part shapes are replaced by their nearest codebook code (needs a codebook).
+    pub retrieval: Retrieval,
 }
 
 /// One row of Table 1: medians over all samples of all clouds.
@@ -309,6 +312,7 @@ pub struct TableRow {
 pub fn guided_table(
     denoiser: &Denoiser,
     decoder: &LatentSdfDecoder,
+    codebook: Option<&Codebook>,
     scales: &FeatureScales,
     schedule: &Schedule,
     clouds: &[Cloud],
@@ -317,7 +321,7 @@ pub fn guided_table(
 ) -> Result<Vec<TableRow>, EngineError> {
     let specs = table_rows(opts)?;
     run_rows(
-        denoiser, decoder, scales, schedule, clouds, opts, &specs, on_sample,
+        denoiser, decoder, codebook, scales, schedule, clouds, opts, &specs, on_sample,
     )
 }
 
@@ -534,6 +538,7 @@ fn short(v: f64) -> String {
 pub fn run_rows(
     denoiser: &Denoiser,
     decoder: &LatentSdfDecoder,
+    codebook: Option<&Codebook>,
     scales: &FeatureScales,
     schedule: &Schedule,
     clouds: &[Cloud],
@@ -585,17 +590,17 @@ pub fn run_rows(
                         guidance: guidance.clone(),
                         sampler: opts.sampler,
                         steps: opts.steps,
+                        retrieval: opts.retrieval,
                         ..Default::default()
                     };
-                    match generate_with(
-                        denoiser,
+                    let shapes = PartShapes {
                         decoder,
-                        Some(decoder as &dyn SdfField),
-                        scales,
-                        schedule,
-                        &req,
-                        &mut |_| ControlFlow::Continue(()),
-                    ) {
+                        field: Some(decoder as &dyn SdfField),
+                        codebook,
+                    };
+                    match generate_with(denoiser, &shapes, scales, schedule, &req, &mut |_| {
+                        ControlFlow::Continue(())
+                    }) {
                         Ok(out) => {
                             let g = &out[0];
                             let m = metrics(decoder, &g.raw, &g.meshes, &cloud.points);
@@ -852,11 +857,13 @@ mod tests {
             meshing: MeshingOptions { resolution: 8 },
             references: Vec::new(),
             id: IdOptions::default(),
+            retrieval: Retrieval::Off,
         };
         let mut calls = 0;
         let rows = guided_table(
             &denoiser,
             &decoder,
+            None,
             &FeatureScales::default(),
             &Schedule::default(),
             &clouds,
@@ -890,6 +897,7 @@ mod tests {
         let rows = guided_table(
             &denoiser,
             &decoder,
+            None,
             &FeatureScales::default(),
             &Schedule::default(),
             &anon,
@@ -905,6 +913,7 @@ mod tests {
         let rows = guided_table(
             &denoiser,
             &decoder,
+            None,
             &FeatureScales::default(),
             &Schedule::default(),
             &clouds,
@@ -921,6 +930,7 @@ mod tests {
         let err = guided_table(
             &denoiser,
             &decoder,
+            None,
             &FeatureScales::default(),
             &Schedule::default(),
             &clouds,
@@ -948,6 +958,7 @@ mod tests {
         let rows = run_rows(
             &denoiser,
             &decoder,
+            None,
             &FeatureScales::default(),
             &Schedule::default(),
             &clouds,

@@ -10,6 +10,7 @@
 //! { "format": "physnap.weights/v1",
 //!   "shape_prior": { "file": "shape_prior.safetensors", "sha256": "…", "config": { "latent": 128, … } },
 //!   "denoiser":    { "file": "denoiser.safetensors",    "sha256": "…", "config": { "width": 160, … } },
+//!   "codebook":    { "file": "codebook.safetensors",    "sha256": "…", "config": { "rows": 9000, "latent": 128, … } },
 //!   "feature_scales": { "node": [135 floats], "edge": [13 floats] },
 //!   "categories": ["Door", "Window", …],
 //!   "data": {…}, "training": {…}, "metrics": {…} }
@@ -22,6 +23,7 @@ use serde_json::Value;
 
 use super::FormatError;
 use crate::graph::FeatureScales;
+use crate::model::codebook::Codebook;
 use crate::model::denoiser::{Denoiser, DenoiserConfig};
 use crate::model::shape_prior::{ShapePrior, ShapePriorConfig};
 use crate::model::weights;
@@ -54,6 +56,22 @@ struct DenoiserConfigDoc {
     legacy_edge_embedding: bool,
 }
 
+/// The retrieval codebook's size and provenance (model/codebook.rs).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CodebookConfig {
+    /// Codes in the file.
+    pub rows: usize,
+    /// Code size (must equal the shape prior's latent size).
+    pub latent: usize,
+    /// Codebook split the codes came from (e.g. `train`).
+    pub split: String,
+    /// Rows of that split before the non-empty check.
+    pub candidates: usize,
+    /// Meshing resolution of the non-empty check.
+    pub check_resolution: usize,
+}
+
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
 struct EntryDoc<C> {
     file: String,
@@ -72,6 +90,8 @@ struct ManifestDoc {
     format: String,
     shape_prior: EntryDoc<ShapeConfigDoc>,
     denoiser: EntryDoc<DenoiserConfigDoc>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    codebook: Option<EntryDoc<CodebookConfig>>,
     feature_scales: ScalesDoc,
     categories: Vec<String>,
     #[serde(default)]
@@ -100,6 +120,8 @@ pub struct Manifest {
     pub shape_prior: Entry<ShapePriorConfig>,
     /// The denoiser.
     pub denoiser: Entry<DenoiserConfig>,
+    /// The retrieval codebook (optional: weights made before it existed have none).
+    pub codebook: Option<Entry<CodebookConfig>>,
     /// Feature scales (model space = raw / scale).
     pub feature_scales: FeatureScales,
     /// Category names; index = position.
@@ -151,6 +173,11 @@ pub fn to_string(m: &Manifest) -> String {
             sha256: m.denoiser.sha256.clone(),
             config: denoiser_to_doc(&m.denoiser.config),
         },
+        codebook: m.codebook.as_ref().map(|c| EntryDoc {
+            file: c.file.clone(),
+            sha256: c.sha256.clone(),
+            config: c.config.clone(),
+        }),
         feature_scales: ScalesDoc {
             node: m.feature_scales.node.clone(),
             edge: m.feature_scales.edge.clone(),
@@ -210,6 +237,11 @@ pub fn from_str(text: &str, path: &str) -> Result<Manifest, FormatError> {
                 legacy_edge_embedding: d.legacy_edge_embedding,
             },
         },
+        codebook: doc.codebook.map(|c| Entry {
+            file: c.file,
+            sha256: c.sha256,
+            config: c.config,
+        }),
         feature_scales: FeatureScales {
             node: doc.feature_scales.node,
             edge: doc.feature_scales.edge,
@@ -231,6 +263,19 @@ pub fn from_str(text: &str, path: &str) -> Result<Manifest, FormatError> {
         )
         .into());
     }
+    if let Some(c) = &m.codebook
+        && c.config.latent != m.shape_prior.config.latent
+    {
+        return Err(crate::error::CoreError::invalid(
+            "manifest codebook.config.latent",
+            format!(
+                "the shape prior's latent size ({})",
+                m.shape_prior.config.latent
+            ),
+            c.config.latent,
+        )
+        .into());
+    }
     Ok(m)
 }
 
@@ -242,9 +287,12 @@ pub struct LoadedModels {
     pub shape_prior: ShapePrior,
     /// The denoiser (inference device).
     pub denoiser: Denoiser,
+    /// The retrieval codebook, when the manifest lists one.
+    pub codebook: Option<Codebook>,
 }
 
-/// Read `dir/manifest.json` and load both models on `device`, verifying sha256 and configs.
+/// Read `dir/manifest.json` and load both models (and the codebook, when listed) on `device`,
+/// verifying sha256 and configs.
 pub fn load_models(dir: &Path, device: &burn::tensor::Device) -> Result<LoadedModels, FormatError> {
     let path = dir.join("manifest.json");
     let text = std::fs::read_to_string(&path).map_err(|source| FormatError::Io {
@@ -278,9 +326,19 @@ pub fn load_models(dir: &Path, device: &burn::tensor::Device) -> Result<LoadedMo
         &dir.join(&manifest.denoiser.file),
         Some(&manifest.denoiser.sha256),
     )?;
+    let codebook = match &manifest.codebook {
+        None => None,
+        Some(c) => Some(Codebook::load(
+            &dir.join(&c.file),
+            c.config.rows,
+            c.config.latent,
+            Some(&c.sha256),
+        )?),
+    };
     Ok(LoadedModels {
         manifest,
         shape_prior,
         denoiser,
+        codebook,
     })
 }

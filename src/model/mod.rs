@@ -6,6 +6,7 @@
 //! the crate uses. CPU work runs on the *current* rayon pool, so callers bound a job with
 //! `ThreadPool::install` (ml-stack.md §4).
 
+pub mod codebook;
 pub mod denoiser;
 pub mod shape_prior;
 

@@ -86,6 +86,11 @@ pub struct JobRequest {
     /// Marching-cubes resolution (8–128, default 32).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub resolution: Option<u32>,
+    /// Replace part shapes by their nearest training code of the weights' codebook: `auto`
+    /// (default: `empty` when the weights have a codebook, else `off`), `off`, `empty` (shapes
+    /// that mesh empty) or `all` (NAP's retrieval variant).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub retrieval: Option<String>,
 }
 
 /// Query parameters of a raw upload (`POST /v1/jobs` with a PLY, NPY or f32le body): the same
@@ -124,6 +129,8 @@ pub struct UploadParams {
     pub preview_every: Option<u32>,
     /// Meshing resolution.
     pub resolution: Option<u32>,
+    /// Codebook retrieval (`auto`, `off`, `empty`, `all`).
+    pub retrieval: Option<String>,
 }
 
 impl JobRequest {
@@ -176,6 +183,7 @@ impl JobRequest {
             deadline_seconds: self.deadline_seconds,
             preview_every: self.preview_every,
             resolution: self.resolution,
+            retrieval: self.retrieval,
         })
     }
 }
@@ -200,6 +208,7 @@ impl UploadParams {
             deadline_seconds: self.deadline_seconds,
             preview_every: self.preview_every,
             resolution: self.resolution,
+            retrieval: self.retrieval,
         }
     }
 }
@@ -239,6 +248,8 @@ pub struct RequestView {
     pub preview_every: u32,
     /// Meshing resolution.
     pub resolution: u32,
+    /// Codebook retrieval as run: `off`, `empty` or `all` (`auto` resolved).
+    pub retrieval: String,
     /// Whether guidance is applied (some weight > 0); false = plain NAP sampling.
     pub guided: bool,
 }
@@ -453,6 +464,7 @@ pub fn request_view(s: &JobSpec) -> RequestView {
         deadline_seconds: s.deadline_seconds,
         preview_every: s.preview_every,
         resolution: s.resolution,
+        retrieval: s.retrieval.clone(),
         guided: s.guided(),
     }
 }

@@ -147,6 +147,7 @@ pub fn input_of(spec: pb::JobSpec) -> JobInput {
         deadline_seconds: spec.deadline_seconds,
         preview_every: spec.preview_every,
         resolution: spec.resolution,
+        retrieval: Some(spec.retrieval).filter(|s| !s.is_empty()),
     }
 }
 

@@ -280,6 +280,7 @@ impl Service {
             categories: m.categories.clone(),
             conditional: m.denoiser.config.categories > 0,
             schedule_steps: models.schedule.len() as u32,
+            codebook: models.loaded.codebook.is_some(),
         };
         let (shutdown_tx, _) = watch::channel(false);
         let svc = Arc::new(Service {

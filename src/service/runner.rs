@@ -24,7 +24,7 @@ use std::ops::ControlFlow;
 use std::time::Instant;
 
 use crate::engine::EngineError;
-use crate::engine::generate::{GenerateRequest, Generated, generate_with};
+use crate::engine::generate::{GenerateRequest, Generated, PartShapes, generate_with};
 use crate::engine::guidance::{GuidanceLosses, GuidanceOptions, SdfField};
 use crate::engine::schedule::{Schedule, timesteps};
 use crate::eval::guided::d_pc;
@@ -215,6 +215,8 @@ struct Ranked {
     seed: u64,
     d_pc: f64,
     diverged: Option<String>,
+    /// Parts that took their nearest codebook shape.
+    retrieved: Vec<usize>,
 }
 
 fn ranking_json(spec: &JobSpec, guidance: &Option<GuidanceOptions>, rows: &[Ranked]) -> Vec<u8> {
@@ -236,6 +238,7 @@ fn ranking_json(spec: &JobSpec, guidance: &Option<GuidanceOptions>, rows: &[Rank
             "max_step": g.max_step,
         })),
         "sampler": spec.sampler, "eta": spec.eta, "steps": spec.steps,
+        "retrieval": spec.retrieval,
         "best": best,
         "samples": rows.iter().enumerate().map(|(rank, r)| serde_json::json!({
             "rank": rank + 1,
@@ -243,6 +246,7 @@ fn ranking_json(spec: &JobSpec, guidance: &Option<GuidanceOptions>, rows: &[Rank
             "seed": r.seed,
             "d_pc": num(r.d_pc),
             "diverged": r.diverged.is_some(),
+            "retrieved_parts": r.retrieved,
             "error": r.diverged,
             "exported": Some(r.index) == best,
         })).collect::<Vec<_>>(),
@@ -274,6 +278,7 @@ pub fn run_job(
         guidance: guidance.clone(),
         sampler: spec.engine_sampler(),
         steps: spec.steps as usize,
+        retrieval: spec.engine_retrieval(),
     };
     let decoder = LatentSdfDecoder::new(&m.shape_prior.decoder);
     let started = Instant::now();
@@ -318,10 +323,14 @@ pub fn run_job(
             });
             ControlFlow::Continue(())
         };
+        let shapes = PartShapes {
+            decoder: &decoder,
+            field: Some(&decoder as &dyn SdfField),
+            codebook: m.codebook.as_ref(),
+        };
         let r = generate_with(
             &m.denoiser,
-            &decoder,
-            Some(&decoder as &dyn SdfField),
+            &shapes,
             scales,
             &models.schedule,
             &one,
@@ -375,6 +384,7 @@ pub fn run_job(
             seed: g.seed,
             d_pc: *d,
             diverged: None,
+            retrieved: g.retrieved.clone(),
         })
         .collect();
     rows.extend(diverged.into_iter().map(|(index, seed, e)| Ranked {
@@ -382,6 +392,7 @@ pub fn run_job(
         seed,
         d_pc: f64::NAN,
         diverged: Some(e),
+        retrieved: Vec::new(),
     }));
     let ranking = ranking_json(spec, &guidance, &rows);
     let chosen = ranked.swap_remove(0).1;

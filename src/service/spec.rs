@@ -8,6 +8,7 @@
 //! `INVALID_ARGUMENT`).
 
 use crate::data::categories::category_index;
+use crate::engine::generate::Retrieval;
 use crate::engine::guidance::{
     DEFAULT_GUIDED_STEPS, DEFAULT_MAX_STEP, DEFAULT_TAU, GuidanceOptions, Terms,
 };
@@ -66,6 +67,8 @@ pub struct JobInput {
     pub preview_every: Option<u32>,
     /// Marching-cubes grid resolution.
     pub resolution: Option<u32>,
+    /// Codebook retrieval of part shapes (`auto`, `off`, `empty`, `all`).
+    pub retrieval: Option<String>,
 }
 
 /// NAP's DDPM (strided ancestral sampling when fewer steps than the schedule are asked for).
@@ -115,6 +118,8 @@ pub struct ModelCaps {
     pub conditional: bool,
     /// Diffusion steps of the schedule.
     pub schedule_steps: u32,
+    /// Whether the weights ship a retrieval codebook.
+    pub codebook: bool,
 }
 
 /// A validated job. Invariants: 16..=100k finite points (per [`Limits`]), a known category for
@@ -156,6 +161,8 @@ pub struct JobSpec {
     pub preview_every: u32,
     /// Marching-cubes resolution.
     pub resolution: u32,
+    /// Codebook retrieval of part shapes: `off`, `empty` or `all` (`auto` is resolved).
+    pub retrieval: String,
 }
 
 /// Largest τ accepted (the engine's limit).
@@ -165,6 +172,11 @@ impl JobSpec {
     /// Whether any guidance weight is positive (otherwise the job samples unguided).
     pub fn guided(&self) -> bool {
         self.w_pc > 0.0 || self.w_pen > 0.0 || self.w_mob > 0.0
+    }
+
+    /// The engine's retrieval mode (an unknown name, impossible after [`validate`], is `Off`).
+    pub fn engine_retrieval(&self) -> Retrieval {
+        Retrieval::parse(&self.retrieval).unwrap_or_default()
     }
 
     /// The engine's sampler.
@@ -465,6 +477,28 @@ pub fn validate(
             resolution,
         ));
     }
+    // auto: replace shapes that mesh empty when the weights have a codebook, else off.
+    let retrieval = match input.retrieval.as_deref().filter(|r| !r.is_empty()) {
+        None | Some("auto") => if caps.codebook { "empty" } else { "off" }.to_string(),
+        Some(r) => match Retrieval::parse(r) {
+            None => {
+                return Err(violation(
+                    "retrieval",
+                    "\"auto\", \"off\", \"empty\" or \"all\"",
+                    format!("{r:?}"),
+                ));
+            }
+            Some(Retrieval::Off) => r.to_string(),
+            Some(_) if !caps.codebook => {
+                return Err(violation(
+                    "retrieval",
+                    "\"off\" or \"auto\" (these weights have no codebook)",
+                    format!("{r:?}"),
+                ));
+            }
+            Some(_) => r.to_string(),
+        },
+    };
     Ok(JobSpec {
         points,
         category,
@@ -482,6 +516,7 @@ pub fn validate(
         deadline_seconds,
         preview_every,
         resolution,
+        retrieval,
     })
 }
 
@@ -494,6 +529,7 @@ mod tests {
             categories: vec!["Door".into(), "Window".into()],
             conditional: true,
             schedule_steps: 1000,
+            codebook: true,
         }
     }
 
@@ -535,6 +571,34 @@ mod tests {
             (1000, 500, Sampler::Ddpm)
         );
         assert_eq!(s.guidance_threshold(1000), 500);
+    }
+
+    #[test]
+    fn retrieval_auto_follows_the_codebook_and_explicit_modes_need_one() {
+        let input = |r: Option<&str>| JobInput {
+            points: Some(cloud(16)),
+            retrieval: r.map(str::to_string),
+            ..Default::default()
+        };
+        let without = ModelCaps {
+            codebook: false,
+            ..caps()
+        };
+        let l = Limits::default();
+        let run = |r, c: &ModelCaps| validate(&input(r), c, &l, 0).map(|s| s.retrieval);
+        assert_eq!(run(None, &caps()).unwrap(), "empty");
+        assert_eq!(run(Some("auto"), &caps()).unwrap(), "empty");
+        assert_eq!(run(Some("all"), &caps()).unwrap(), "all");
+        assert_eq!(run(None, &without).unwrap(), "off");
+        assert_eq!(run(Some("off"), &without).unwrap(), "off");
+        let v = run(Some("all"), &without).unwrap_err();
+        assert_eq!(
+            (v.field.as_str(), v.value.as_str()),
+            ("retrieval", "\"all\"")
+        );
+        assert!(v.limit.contains("no codebook"), "{v}");
+        let s = validate(&input(Some("all")), &caps(), &l, 0).unwrap();
+        assert_eq!(s.engine_retrieval(), Retrieval::All);
     }
 
     #[test]
@@ -646,6 +710,12 @@ mod tests {
             assert_eq!((v.field.as_str(), v.value.as_str()), ("tau", shown));
             assert!(v.limit.contains("> 0"), "{v}");
         }
+        let v = bad(&|i| i.retrieval = Some("nearest".into()));
+        assert_eq!(
+            (v.field.as_str(), v.value.as_str()),
+            ("retrieval", "\"nearest\"")
+        );
+        assert!(v.limit.contains("\"empty\""), "{v}");
         let v = bad(&|i| i.sampler = Some("euler".into()));
         assert_eq!(
             (v.field.as_str(), v.value.as_str()),

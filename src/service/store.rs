@@ -171,6 +171,13 @@ struct SpecDoc {
     deadline_seconds: f64,
     preview_every: u32,
     resolution: u32,
+    /// Rows written before retrieval existed ran without it.
+    #[serde(default = "retrieval_off")]
+    retrieval: String,
+}
+
+fn retrieval_off() -> String {
+    "off".into()
 }
 
 fn spec_to_row(s: &JobSpec) -> (String, Vec<u8>) {
@@ -190,6 +197,7 @@ fn spec_to_row(s: &JobSpec) -> (String, Vec<u8>) {
         deadline_seconds: s.deadline_seconds,
         preview_every: s.preview_every,
         resolution: s.resolution,
+        retrieval: s.retrieval.clone(),
     };
     let mut blob = Vec::with_capacity(s.points.len() * 12);
     for p in &s.points {
@@ -231,6 +239,7 @@ fn spec_from_row(id: &str, json: &str, blob: &[u8]) -> Result<JobSpec, StoreErro
         deadline_seconds: d.deadline_seconds,
         preview_every: d.preview_every,
         resolution: d.resolution,
+        retrieval: d.retrieval,
     })
 }
 

@@ -7,6 +7,7 @@
 //! and are deterministic for a seed (own [`crate::data::rng::Rng`], seeded weight init). CPU
 //! work runs on the current rayon pool unless a config asks for its own thread count.
 
+pub mod codebook;
 pub mod diffusion;
 pub mod shape;
 

@@ -59,6 +59,7 @@ pub fn tiny_weights(dir: &Path) {
             sha256: dn_sha,
             config: dn_cfg,
         },
+        codebook: None,
         feature_scales: FeatureScales::default(),
         categories,
         data: serde_json::json!({"note": "untrained test weights"}),

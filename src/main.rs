@@ -227,6 +227,10 @@ struct DiffusionArgs {
     /// Continue from the checkpoint in --out.
     #[arg(long, env = "PHYSNAP_RESUME")]
     resume: bool,
+    /// End this run after this many steps in total, with a checkpoint (the learning-rate
+    /// schedule still spans --steps; continue with --resume). For splitting long runs.
+    #[arg(long, env = "PHYSNAP_DIFFUSION_STOP_AT")]
+    stop_at: Option<usize>,
 }
 
 #[derive(Args, Debug)]

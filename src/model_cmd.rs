@@ -82,6 +82,7 @@ pub fn diffusion(a: DiffusionArgs) -> anyhow::Result<()> {
         lr_decay_start: a.lr_decay_start,
         lr_final_factor: a.lr_final_factor,
         ema_decay: a.ema_decay,
+        stop_at: a.stop_at,
         ..DiffusionTrainConfig::default()
     };
     let pb = super::progress_bar(cfg.steps, "diffusion");
@@ -142,6 +143,12 @@ pub fn diffusion(a: DiffusionArgs) -> anyhow::Result<()> {
         report.final_loss,
         a.out.display()
     );
+    if report.steps < a.steps {
+        println!(
+            "stopped at step {} of {} (--stop-at); continue with the same command and --resume",
+            report.steps, a.steps
+        );
+    }
     Ok(())
 }
 

@@ -84,6 +84,9 @@ pub struct DiffusionTrainConfig {
     pub lr_final_factor: f64,
     /// Weight-EMA decay (0 = off).
     pub ema_decay: f64,
+    /// End this run after this many steps in total (a checkpoint is written there; the
+    /// schedule still runs to `steps`, so `--resume` continues the same run). None: `steps`.
+    pub stop_at: Option<usize>,
 }
 
 impl DiffusionTrainConfig {
@@ -113,6 +116,7 @@ impl Default for DiffusionTrainConfig {
             lr_decay_start: 0,
             lr_final_factor: 0.1,
             ema_decay: 0.999,
+            stop_at: None,
         }
     }
 }
@@ -370,6 +374,12 @@ pub fn train_diffusion(
             "within [0, 1)",
             cfg.ema_decay.to_string(),
         ),
+        (
+            "stop_at",
+            cfg.stop_at.is_none_or(|s| (1..=cfg.steps).contains(&s)),
+            "within 1..=steps",
+            format!("{:?}", cfg.stop_at),
+        ),
     ] {
         if !ok {
             return Err(TrainError::Config {
@@ -419,7 +429,8 @@ pub fn train_diffusion(
     let no_category = cfg.model.categories;
     let bsz = cfg.batch_objects * cfg.noise_levels;
     let mut sha = String::new();
-    for step in start..cfg.steps {
+    let end = cfg.stop_at.unwrap_or(cfg.steps);
+    for step in start..end {
         let mut rng = Rng::fork(cfg.seed, step as u64);
         let mut x0 = Vec::with_capacity(bsz);
         let mut ts = Vec::with_capacity(bsz);
@@ -512,7 +523,7 @@ pub fn train_diffusion(
             loss_ema: ema,
             elapsed: t0.elapsed().as_secs_f64(),
         });
-        if (step + 1) % cfg.checkpoint_every == 0 || step + 1 == cfg.steps {
+        if (step + 1) % cfg.checkpoint_every == 0 || step + 1 == end {
             let ck = match shadow.as_ref() {
                 Some(shadow) => {
                     let raw_sha = weights::save(&model.valid(), &raw_path)?;
@@ -540,7 +551,8 @@ pub fn train_diffusion(
     }
     let wall = t0.elapsed().as_secs_f64();
     let summary = json!({
-        "steps": cfg.steps, "resumed_from": start, "wall_seconds": wall,
+        "steps": cfg.steps, "resumed_from": start, "completed": end.max(start),
+        "wall_seconds": wall,
         "wall_seconds_total": prior_wall + wall, "final_loss_ema": ema,
         "batch_objects": cfg.batch_objects, "noise_levels": cfg.noise_levels, "lr": cfg.lr,
         "lr_decay_start": cfg.lr_decay_start, "lr_final_factor": cfg.lr_final_factor,
@@ -556,7 +568,7 @@ pub fn train_diffusion(
     )
     .map_err(|e| data_err(&path, e.to_string()))?;
     Ok(DiffusionTrainReport {
-        steps: cfg.steps,
+        steps: end.max(start),
         wall_seconds: wall,
         wall_seconds_total: prior_wall + wall,
         final_loss: ema,
@@ -624,6 +636,7 @@ mod tests {
             lr_decay_start: 40,
             lr_final_factor: 0.1,
             ema_decay: 0.9,
+            stop_at: None,
         }
     }
 
@@ -643,13 +656,30 @@ mod tests {
         // The shipped file is the EMA, the raw weights sit beside it and differ.
         let raw = std::fs::read(dir.path().join("denoiser_raw.safetensors")).unwrap();
         assert_ne!(raw, std::fs::read(&report.weights).unwrap());
-        // Resume: a run to 80 steps continues from step 60.
+        // Resume: a run to 80 steps continues from step 60; --stop-at 70 ends it there with a
+        // checkpoint (off the checkpoint_every grid), and the next resume finishes it.
         let mut steps = Vec::new();
+        let stopped = DiffusionTrainConfig {
+            stop_at: Some(70),
+            ..tiny_config(80)
+        };
+        let r = train_diffusion(&data, &stopped, dir.path(), true, &mut |p| {
+            steps.push(p.step)
+        })
+        .unwrap();
+        assert_eq!((steps.first(), steps.last()), (Some(&61), Some(&70)));
+        assert_eq!(r.steps, 70);
+        let ck: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(dir.path().join("checkpoint.json")).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(ck["step"], 70);
+        steps.clear();
         train_diffusion(&data, &tiny_config(80), dir.path(), true, &mut |p| {
             steps.push(p.step)
         })
         .unwrap();
-        assert_eq!(steps.first(), Some(&61));
+        assert_eq!(steps.first(), Some(&71));
         assert_eq!(steps.last(), Some(&80));
         // The report and the checkpoint count the wall time of both runs.
         let summary: serde_json::Value = serde_json::from_str(
@@ -678,6 +708,21 @@ mod tests {
         .unwrap()
         .to_string();
         assert!(e.contains("category_dropout") && e.contains("1.5"), "{e}");
+        let cfg = DiffusionTrainConfig {
+            stop_at: Some(11),
+            ..tiny_config(10)
+        };
+        let e = train_diffusion(
+            &tiny_data(),
+            &cfg,
+            tempfile::tempdir().unwrap().path(),
+            false,
+            &mut |_| {},
+        )
+        .err()
+        .unwrap()
+        .to_string();
+        assert!(e.contains("stop_at") && e.contains("11"), "{e}");
     }
 
     #[test]

@@ -282,3 +282,75 @@ fn synth_import_train_generate() {
         "{e}"
     );
 }
+
+/// `scripts/reproduce-weights.sh` (the README's one command for the shipped weights) runs its
+/// whole recipe — including the three denoiser stages and the codebook — at toy scale.
+#[test]
+fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
+    let root = tempfile::tempdir().unwrap();
+    let out = root.path().join("repro");
+    let o = Command::new("bash")
+        .arg(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/scripts/reproduce-weights.sh"
+        ))
+        .arg(&out)
+        .env("PHYSNAP_BIN", env!("CARGO_BIN_EXE_physnap"))
+        .env("PHYSNAP_LOG", "warn")
+        .env("OBJECTS", "26")
+        .env("SHAPE_STEPS", "4")
+        .env("STAGE1", "2")
+        .env("STAGE2", "3")
+        .env("STEPS", "5")
+        .env("BATCH_OBJECTS", "2")
+        .env("CHECKPOINT_EVERY", "1")
+        .env("IMPORT_FLAGS", "--uniform 256 --near 256 --surface 64")
+        .env("SHAPE_FLAGS", "--batch-parts 4")
+        .env("DENOISER_FLAGS", "--width 32 --layers 1")
+        .env("EVAL", "0")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    // The three stages ran in order: stage 2 stopped at 3, stage 3 resumed there.
+    assert_eq!(err.matches("+ physnap train diffusion").count(), 3, "{err}");
+    let read = |p: &Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+    };
+    let w = out.join("weights");
+    let summary = read(&w.join("diffusion_train.json"));
+    assert_eq!(
+        (
+            &summary["completed"],
+            &summary["resumed_from"],
+            &summary["lr_decay_start"]
+        ),
+        (
+            &serde_json::json!(5),
+            &serde_json::json!(3),
+            &serde_json::json!(2)
+        ),
+        "{summary:#}"
+    );
+    assert_eq!(read(&w.join("checkpoint.json"))["step"], 5);
+    let m = read(&w.join("manifest.json"));
+    assert!(
+        m["codebook"]["config"]["rows"].as_u64().unwrap() >= 1,
+        "{m:#}"
+    );
+    // Bad stage order is refused before anything runs.
+    let o = Command::new("bash")
+        .arg(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/scripts/reproduce-weights.sh"
+        ))
+        .arg(root.path().join("bad"))
+        .env("PHYSNAP_BIN", env!("CARGO_BIN_EXE_physnap"))
+        .env("STAGE1", "5")
+        .env("STAGE2", "3")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("STAGE1 < STAGE2 < STEPS"));
+    assert!(!root.path().join("bad").exists());
+}

@@ -58,25 +58,58 @@ fn shipped_weights_load_and_sample_deterministically() {
 
 #[test]
 fn a_corrupted_copy_of_the_shipped_weights_is_refused() {
-    let dir = tempfile::tempdir().unwrap();
-    for f in [
-        "manifest.json",
+    for corrupt in [
         "denoiser.safetensors",
         "shape_prior.safetensors",
+        "codebook.safetensors",
     ] {
-        std::fs::copy(weights().join(f), dir.path().join(f)).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        for f in [
+            "manifest.json",
+            "denoiser.safetensors",
+            "shape_prior.safetensors",
+            "codebook.safetensors",
+        ] {
+            std::fs::copy(weights().join(f), dir.path().join(f)).unwrap();
+        }
+        let path = dir.path().join(corrupt);
+        let mut bytes = std::fs::read(&path).unwrap();
+        let k = bytes.len() - 100;
+        bytes[k] ^= 0x40;
+        std::fs::write(&path, bytes).unwrap();
+        let e = match load_models(dir.path(), &physnap::model::cpu()) {
+            Ok(_) => panic!("a corrupted {corrupt} must be refused"),
+            Err(e) => e.to_string(),
+        };
+        assert!(e.contains(corrupt) && e.contains("sha256"), "{e}");
     }
-    let path = dir.path().join("denoiser.safetensors");
-    let mut bytes = std::fs::read(&path).unwrap();
-    let k = bytes.len() - 100;
-    bytes[k] ^= 0x40;
-    std::fs::write(&path, bytes).unwrap();
-    let e = match load_models(dir.path(), &physnap::model::cpu()) {
-        Ok(_) => panic!("a corrupted file must be refused"),
-        Err(e) => e.to_string(),
+}
+
+#[test]
+fn the_shipped_codebook_retrieves_non_empty_shapes() {
+    let dev = physnap::model::cpu();
+    let models = load_models(weights(), &dev).unwrap();
+    let codebook = models
+        .codebook
+        .as_ref()
+        .expect("weights/ ships a retrieval codebook");
+    let entry = models.manifest.codebook.as_ref().unwrap();
+    assert_eq!(codebook.rows(), entry.config.rows);
+    assert_eq!(codebook.latent(), models.manifest.shape_prior.config.latent);
+    assert!(entry.config.rows > entry.config.candidates / 2, "{entry:?}");
+    // Every row meshes non-empty at the recorded check resolution (spot check of 16 rows).
+    let decoder = LatentSdfDecoder::new(&models.shape_prior.decoder);
+    let check = MeshingOptions {
+        resolution: entry.config.check_resolution,
     };
-    assert!(
-        e.contains("denoiser.safetensors") && e.contains("sha256"),
-        "{e}"
-    );
+    for i in (0..codebook.rows()).step_by(codebook.rows() / 16) {
+        let code = codebook.row(i);
+        let m = physnap::mesh::extract_normalised(
+            physnap::shape::LatentDecoder::sdf(&decoder, code).as_ref(),
+            &check,
+        )
+        .unwrap();
+        assert!(!m.triangles.is_empty(), "codebook row {i} meshes empty");
+        assert_eq!(codebook.nearest(code).unwrap().1, 0.0);
+    }
 }

@@ -202,6 +202,18 @@ impl Sdf for AnalyticSdf<'_> {
     }
 }
 
+/// Test decoder: code `[r, …]` is a sphere of radius r in the normalised frame (r ≤ 0: empty).
+#[cfg(test)]
+pub(crate) struct SphereCodes;
+
+#[cfg(test)]
+impl LatentDecoder for SphereCodes {
+    fn sdf<'a>(&'a self, code: &'a [f32]) -> Box<dyn Sdf + 'a> {
+        let r = code[0];
+        Box::new(move |p: [f32; 3]| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() - r)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

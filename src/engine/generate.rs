@@ -274,16 +274,7 @@ mod tests {
 
     use super::*;
     use crate::object::Part;
-    use crate::shape::Sdf;
-
-    /// Decodes code `[r, …]` to a sphere of radius r in the normalised frame (r ≤ 0: empty).
-    struct Spheres;
-    impl LatentDecoder for Spheres {
-        fn sdf<'a>(&'a self, code: &'a [f32]) -> Box<dyn Sdf + 'a> {
-            let r = code[0];
-            Box::new(move |p: [f32; 3]| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() - r)
-        }
-    }
+    use crate::shape::SphereCodes as Spheres;
 
     fn part(name: &str, shape: PartShape) -> Part {
         Part {
@@ -312,19 +303,15 @@ mod tests {
         let meshing = MeshingOptions { resolution: 16 };
         // Row 1 is nearest to the empty base's code [-0.3, 0]; every row is non-empty.
         let codebook = Codebook::new(2, vec![0.4, 3.0, 0.25, 0.1, 0.3, 1.1]).unwrap();
-        let mut obj = object();
-        let mut meshes = crate::mesh::mesh_parts(&obj, Some(&Spheres), &meshing).unwrap();
-        assert!(meshes[0].triangles.is_empty() && !meshes[1].triangles.is_empty());
-        let door = meshes[1].clone();
-        let got = retrieve_shapes(
-            &mut obj,
-            &mut meshes,
-            &Spheres,
-            &codebook,
-            Retrieval::Empty,
-            &meshing,
-        )
-        .unwrap();
+        // Mesh `obj`, run retrieval in `mode`: (object, meshes, replaced parts) or the error.
+        let run = |mut obj: ArticulatedObject, mode| {
+            let mut meshes = crate::mesh::mesh_parts(&obj, Some(&Spheres), &meshing).unwrap();
+            retrieve_shapes(&mut obj, &mut meshes, &Spheres, &codebook, mode, &meshing)
+                .map(|got| (obj, meshes, got))
+        };
+        let before = crate::mesh::mesh_parts(&object(), Some(&Spheres), &meshing).unwrap();
+        assert!(before[0].triangles.is_empty() && !before[1].triangles.is_empty());
+        let (obj, meshes, got) = run(object(), Retrieval::Empty).unwrap();
         assert_eq!(got, vec![0]);
         assert_eq!(obj.parts[0].shape, PartShape::Latent(vec![0.25, 0.1]));
         assert!(
@@ -332,53 +319,21 @@ mod tests {
             "the base now has a surface"
         );
         assert_eq!(obj.parts[1].shape, PartShape::Latent(vec![0.2, 1.0]));
-        assert_eq!(meshes[1], door, "non-empty shapes are untouched");
+        assert_eq!(meshes[1], before[1], "non-empty shapes are untouched");
 
         // All: every latent part takes its nearest code; analytic parts are left alone.
-        let mut obj = object();
-        let mut meshes = crate::mesh::mesh_parts(&obj, Some(&Spheres), &meshing).unwrap();
-        let got = retrieve_shapes(
-            &mut obj,
-            &mut meshes,
-            &Spheres,
-            &codebook,
-            Retrieval::All,
-            &meshing,
-        )
-        .unwrap();
+        let (obj, _, got) = run(object(), Retrieval::All).unwrap();
         assert_eq!(got, vec![0, 1]);
         assert_eq!(obj.parts[1].shape, PartShape::Latent(vec![0.3, 1.1]));
         assert_eq!(obj.parts[2].shape, PartShape::Box);
         // Off changes nothing.
-        let mut obj = object();
-        let before = obj.clone();
-        assert!(
-            retrieve_shapes(
-                &mut obj,
-                &mut meshes,
-                &Spheres,
-                &codebook,
-                Retrieval::Off,
-                &meshing
-            )
-            .unwrap()
-            .is_empty()
-        );
-        assert_eq!(obj, before);
+        let (obj, meshes, got) = run(object(), Retrieval::Off).unwrap();
+        assert!(got.is_empty());
+        assert_eq!((obj, meshes), (object(), before));
         // A code of the wrong length is refused, naming the part and the size.
         let mut obj = object();
         obj.parts[0].shape = PartShape::Latent(vec![-1.0]);
-        let mut meshes = crate::mesh::mesh_parts(&obj, Some(&Spheres), &meshing).unwrap();
-        let e = retrieve_shapes(
-            &mut obj,
-            &mut meshes,
-            &Spheres,
-            &codebook,
-            Retrieval::Empty,
-            &meshing,
-        )
-        .unwrap_err()
-        .to_string();
+        let e = run(obj, Retrieval::Empty).unwrap_err().to_string();
         assert!(
             e.contains("part 0 shape code") && e.contains("2 values"),
             "{e}"

@@ -191,16 +191,7 @@ impl Codebook {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::shape::Sdf;
-
-    /// Decodes code `[r, …]` to a sphere of radius r (r ≤ 0: empty).
-    struct Spheres;
-    impl LatentDecoder for Spheres {
-        fn sdf<'a>(&'a self, code: &'a [f32]) -> Box<dyn Sdf + 'a> {
-            let r = code[0];
-            Box::new(move |p: [f32; 3]| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() - r)
-        }
-    }
+    use crate::shape::SphereCodes as Spheres;
 
     #[test]
     fn nearest_is_the_euclidean_nearest_row() {

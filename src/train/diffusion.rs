@@ -695,33 +695,22 @@ mod tests {
 
     #[test]
     fn bad_config_values_are_named() {
-        let mut cfg = tiny_config(10);
-        cfg.category_dropout = 1.5;
-        let e = train_diffusion(
-            &tiny_data(),
-            &cfg,
-            tempfile::tempdir().unwrap().path(),
-            false,
-            &mut |_| {},
-        )
-        .err()
-        .unwrap()
-        .to_string();
+        let err = |cfg: DiffusionTrainConfig| {
+            let dir = tempfile::tempdir().unwrap();
+            train_diffusion(&tiny_data(), &cfg, dir.path(), false, &mut |_| {})
+                .err()
+                .unwrap()
+                .to_string()
+        };
+        let e = err(DiffusionTrainConfig {
+            category_dropout: 1.5,
+            ..tiny_config(10)
+        });
         assert!(e.contains("category_dropout") && e.contains("1.5"), "{e}");
-        let cfg = DiffusionTrainConfig {
+        let e = err(DiffusionTrainConfig {
             stop_at: Some(11),
             ..tiny_config(10)
-        };
-        let e = train_diffusion(
-            &tiny_data(),
-            &cfg,
-            tempfile::tempdir().unwrap().path(),
-            false,
-            &mut |_| {},
-        )
-        .err()
-        .unwrap()
-        .to_string();
+        });
         assert!(e.contains("stop_at") && e.contains("11"), "{e}");
     }
 

@@ -19,8 +19,8 @@
 
 use burn::tensor::{Tensor, TensorData};
 
-use super::field::{PartTensors, SdfField, part_sdf};
-use super::grid::{GridBatch, axis_counts, ints, psi};
+use super::field::{PartTensors, SdfField, overlap_energy};
+use super::grid::{GridBatch, axis_counts, ints};
 use crate::data::rng::Rng;
 use crate::graph::{EDGE_DIM, EDGE_PAIRS, edge_ch};
 
@@ -245,7 +245,6 @@ pub fn sweep(
         ext.select(0, act.clone()),
         &device,
     );
-    let nq = grid.len();
     let owner = grid.owner_tensor(&device);
     let item_of: Vec<usize> = grid
         .owner
@@ -260,8 +259,12 @@ pub fn sweep(
     let qi: Vec<i64> = item_of.iter().map(|&k| items[k].i as i64).collect();
     let qj: Vec<i64> = item_of.iter().map(|&k| items[k].j as i64).collect();
     let idx = ints([qi, qj].concat(), &device);
-    let d = part_sdf(field, parts, idx, Tensor::cat(vec![q, xj], 0));
-    let psi = psi(d.clone().narrow(0, 0, nq), d.narrow(0, nq, nq));
     let w = weights.select(0, act) * vel;
-    Some((psi * w.select(0, owner)).sum())
+    overlap_energy(
+        field,
+        parts,
+        idx,
+        Tensor::cat(vec![q, xj], 0),
+        w.select(0, owner),
+    )
 }

@@ -9,13 +9,14 @@
 //! Everything in the sum is symmetric in (i, i'), so each unordered pair is evaluated once and
 //! counted twice. Skipped (exact zero contribution, or negligible): pairs whose boxes do not
 //! intersect, and pairs with õ_i õ_i' < [`MIN_EXIST_PRODUCT`] (õ clamped to [0, 1]). All grid
-//! points of all remaining pairs, for both parts, are one field call.
+//! points of all remaining pairs, for both parts, are one field call without gradient; the
+//! differentiable call decodes only the points where the parts overlap (`overlap_energy`).
 
 use burn::tensor::Tensor;
 
 use super::HostParts;
-use super::field::{PartTensors, SdfField, part_sdf};
-use super::grid::{GridBatch, axis_counts, ints, psi};
+use super::field::{PartTensors, SdfField, overlap_energy};
+use super::grid::{GridBatch, axis_counts, ints};
 use crate::graph::EDGE_PAIRS;
 
 /// Pairs whose existence product is below this are skipped.
@@ -70,7 +71,6 @@ pub fn loss(
     let hi = (ci + bi).min_pair(cj + bj);
     let ext = (hi - lo.clone()).clamp_min(0.0);
     let (q, vel) = grid.points(lo, ext, &device);
-    let nq = grid.len();
     let owner = grid.owner_tensor(&device);
     let qi: Vec<i64> = grid
         .owner
@@ -84,9 +84,7 @@ pub fn loss(
         .collect();
     let idx = ints([qi, qj].concat(), &device);
     let u = q.repeat_dim(0, 2) - parts.centres.clone().select(0, idx.clone());
-    let d = part_sdf(field, parts, idx, u);
-    let psi = psi(d.clone().narrow(0, 0, nq), d.narrow(0, nq, nq));
     let o = exist.clamp(0.0, 1.0);
     let weight = o.clone().select(0, pi) * o.select(0, pj) * vel * 2.0;
-    Some((psi * weight.select(0, owner)).sum())
+    overlap_energy(field, parts, idx, u, weight.select(0, owner))
 }

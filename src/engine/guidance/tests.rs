@@ -473,3 +473,57 @@ fn options_follow_the_paper_and_bad_values_name_field_limit_value() {
     let e = err(GuidanceOptions { tau: 0.0, ..all });
     assert!(e.contains("guidance.tau") && e.contains("(0, 1e9]"), "{e}");
 }
+
+#[test]
+fn overlap_energy_equals_the_sum_over_every_point_in_value_and_gradient() {
+    use super::field::{PartTensors, overlap_energy, part_sdf};
+    let field = mixed();
+    let ad = cpu_autodiff();
+    let mut rng = Rng::new(5);
+    let mut draw = |n: usize, lo: f64, hi: f64| -> Vec<f32> {
+        (0..n).map(|_| rng.range(lo, hi) as f32).collect()
+    };
+    // 3 parts; 200 points, each seen from part i and part j: some overlap, most do not.
+    let (k, nq) = (3, 200);
+    let data = [
+        draw(k * 3, 0.2, 0.5),
+        draw(k * 3, -0.2, 0.2),
+        draw(k * LATENT, 0.1, 0.6),
+        draw(2 * nq * 3, -0.8, 0.8),
+        draw(nq, 0.5, 2.0),
+    ];
+    let pairs: Vec<i64> = (0..nq).map(|a| (a % k) as i64).collect();
+    let others: Vec<i64> = (0..nq).map(|a| ((a + 1) % k) as i64).collect();
+    let idx_data = [pairs, others].concat();
+    // Value and gradient (boxes, centres, codes) of the energy, on a fresh graph each time.
+    let run = |pruned: bool| -> (f32, Vec<f32>) {
+        let t2 = |v: &Vec<f32>, c: usize| {
+            Tensor::<2>::from_data(TensorData::new(v.clone(), [v.len() / c, c]), &ad)
+        };
+        let boxes = t2(&data[0], 3).require_grad();
+        let centres = t2(&data[1], 3).require_grad();
+        let codes = t2(&data[2], LATENT).require_grad();
+        let idx = Tensor::<1, Int>::from_data(TensorData::new(idx_data.clone(), [2 * nq]), &ad);
+        let w = Tensor::<1>::from_data(TensorData::new(data[4].clone(), [nq]), &ad);
+        let parts = PartTensors::new(boxes.clone(), centres.clone(), codes.clone());
+        let u = t2(&data[3], 3) + centres.clone().select(0, idx.clone());
+        let l = if pruned {
+            overlap_energy(&field, &parts, idx, u, w).expect("some points overlap")
+        } else {
+            let d = part_sdf(&field, &parts, idx, u);
+            (super::grid::psi(d.clone().narrow(0, 0, nq), d.narrow(0, nq, nq)) * w).sum()
+        };
+        let value = l.clone().into_data().try_to_vec::<f32>().unwrap()[0];
+        let g = l.backward();
+        let flat =
+            |t: &Tensor<2>| -> Vec<f32> { t.grad(&g).unwrap().into_data().try_to_vec().unwrap() };
+        (value, [flat(&boxes), flat(&centres), flat(&codes)].concat())
+    };
+    let (va, ga) = run(false);
+    let (vp, gp) = run(true);
+    assert!(va > 0.0);
+    assert!((va - vp).abs() <= 1e-5 * va.abs(), "{va} vs {vp}");
+    for (a, p) in ga.iter().zip(&gp) {
+        assert!((a - p).abs() <= 1e-4 * a.abs().max(1e-3), "{a} vs {p}");
+    }
+}

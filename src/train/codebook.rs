@@ -11,11 +11,8 @@
 use std::path::Path;
 use std::time::Instant;
 
-use serde_json::Value;
-
 use super::TrainError;
 use crate::io::manifest::{self, CodebookConfig, Entry};
-use crate::io::npy;
 use crate::mesh::MeshingOptions;
 use crate::model::codebook::Codebook;
 use crate::model::shape_prior::{LatentSdfDecoder, ShapePrior};
@@ -38,11 +35,6 @@ pub struct CodebookReport {
     pub sha256: String,
     /// Wall time, seconds.
     pub seconds: f64,
-}
-
-fn read_json(path: &Path) -> Result<Value, TrainError> {
-    let text = std::fs::read_to_string(path).map_err(TrainError::io(path))?;
-    serde_json::from_str(&text).map_err(|e| TrainError::data(path, e.to_string()))
 }
 
 /// Build the codebook of `weights` from the training-split codes in `shape` (a `train shape`
@@ -83,36 +75,22 @@ pub fn build_codebook(
     weights::load_bytes(&mut prior, shape_bytes, &shape_file.display().to_string())?;
     let decoder = LatentSdfDecoder::new(&prior.decoder);
 
-    let npy_path = shape.join(super::shape::CODEBOOK_FILE);
-    let (rows, cols, codes) =
-        npy::read(&npy_path).map_err(|e| TrainError::data(&npy_path, e.to_string()))?;
     let latent = m.shape_prior.config.latent;
-    if cols != latent {
-        return Err(TrainError::data(
-            &npy_path,
-            format!("codes have {cols} dimensions, the shape prior's latent size is {latent}"),
-        ));
-    }
-    let index_path = shape.join(super::shape::CODEBOOK_INDEX_FILE);
-    let index = read_json(&index_path)?;
-    let keys = index["keys"]
-        .as_array()
-        .ok_or_else(|| TrainError::data(&index_path, "no \"keys\" list"))?;
-    if keys.len() != rows {
-        return Err(TrainError::data(
-            &index_path,
-            format!("{} keys for {rows} codes", keys.len()),
-        ));
-    }
-    let train: Vec<f32> = keys
+    let book = super::shape::read_codebook(shape, latent)?;
+    let cols = book.cols;
+    let train: Vec<f32> = book
+        .keys
         .iter()
-        .zip(codes.chunks_exact(cols))
+        .zip(book.codes.chunks_exact(cols))
         .filter(|(k, _)| k["split"] == "train")
         .flat_map(|(_, c)| c.iter().copied())
         .collect();
     let candidates = train.len() / cols;
     if candidates == 0 {
-        return Err(TrainError::data(&index_path, "no training-split codes"));
+        return Err(TrainError::data(
+            shape.join(super::shape::CODEBOOK_INDEX_FILE),
+            "no training-split codes",
+        ));
     }
     let (codebook, _) = Codebook::build(latent, &train, &decoder, &check, on_row)?;
     let file = weights_dir.join(CODEBOOK_WEIGHTS_FILE);

@@ -159,21 +159,10 @@ fn read_json(path: &Path) -> Result<Value, TrainError> {
 /// (`shape/codebook.npy` + `shape/codebook.json`).
 pub fn load_data(data: &Path, shape: &Path) -> Result<DiffusionData, TrainError> {
     let index = read_json(&data.join("dataset.json"))?;
-    let (rows, cols, codes) = npy::read(&shape.join("codebook.npy"))
-        .map_err(|e| data_err(&shape.join("codebook.npy"), e.to_string()))?;
-    if cols != crate::object::LATENT_DIM {
-        return Err(data_err(
-            &shape.join("codebook.npy"),
-            format!(
-                "codes have {cols} dimensions, expected {}",
-                crate::object::LATENT_DIM
-            ),
-        ));
-    }
-    let keys = read_json(&shape.join("codebook.json"))?;
-    let keys: Vec<String> = keys["keys"]
-        .as_array()
-        .ok_or_else(|| data_err(&shape.join("codebook.json"), "no \"keys\" list"))?
+    let book = super::shape::read_codebook(shape, crate::object::LATENT_DIM)?;
+    let (cols, codes) = (book.cols, &book.codes);
+    let keys: Vec<String> = book
+        .keys
         .iter()
         .map(|k| {
             k["key"]
@@ -183,12 +172,6 @@ pub fn load_data(data: &Path, shape: &Path) -> Result<DiffusionData, TrainError>
                 .to_string()
         })
         .collect();
-    if keys.len() != rows {
-        return Err(data_err(
-            &shape.join("codebook.json"),
-            format!("{} keys for {rows} codes", keys.len()),
-        ));
-    }
     let code_of: std::collections::HashMap<&str, &[f32]> = keys
         .iter()
         .enumerate()

@@ -685,6 +685,45 @@ pub fn load_shape_prior(
     Ok(model)
 }
 
+/// A `train shape` codebook as read back: codes (row-major) with their `codebook.json` keys.
+pub struct CodebookFile {
+    /// Code size.
+    pub cols: usize,
+    /// `rows × cols` codes.
+    pub codes: Vec<f32>,
+    /// One `{"key", "object", "part", "split"}` entry per row.
+    pub keys: Vec<serde_json::Value>,
+}
+
+/// Read `shape/codebook.npy` + `shape/codebook.json`; refuses codes that are not `latent` wide
+/// and a key list that does not match the rows, naming the file.
+pub fn read_codebook(shape: &Path, latent: usize) -> Result<CodebookFile, TrainError> {
+    let npy_path = shape.join(CODEBOOK_FILE);
+    let (rows, cols, codes) =
+        npy::read(&npy_path).map_err(|e| TrainError::data(&npy_path, e.to_string()))?;
+    if cols != latent {
+        return Err(TrainError::data(
+            &npy_path,
+            format!("codes have {cols} dimensions, expected {latent}"),
+        ));
+    }
+    let index_path = shape.join(CODEBOOK_INDEX_FILE);
+    let text = std::fs::read_to_string(&index_path).map_err(TrainError::io(&index_path))?;
+    let index: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| TrainError::data(&index_path, e.to_string()))?;
+    let keys = index["keys"]
+        .as_array()
+        .ok_or_else(|| TrainError::data(&index_path, "no \"keys\" list"))?
+        .clone();
+    if keys.len() != rows {
+        return Err(TrainError::data(
+            &index_path,
+            format!("{} keys for {rows} codes", keys.len()),
+        ));
+    }
+    Ok(CodebookFile { cols, codes, keys })
+}
+
 /// Encode every part of the data set (dataset order) from its first `surface_points` surface
 /// points; writes `codebook.npy` and `codebook.json`. Returns the number of rows.
 fn write_codebook(

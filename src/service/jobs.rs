@@ -647,6 +647,30 @@ impl Service {
         Ok(rx)
     }
 
+    /// Send the live job's latest preview if this watcher has not seen it (previews are sticky:
+    /// coalesced progress must not lose them). False when the watcher is gone.
+    async fn send_preview(
+        tx: &mpsc::Sender<WatchItem>,
+        live: Option<&watch::Receiver<Arc<Snapshot>>>,
+        previews_sent: &mut u64,
+        sequence: u64,
+    ) -> bool {
+        let Some(rx) = live else { return true };
+        let snap = rx.borrow().clone();
+        match &snap.last_preview {
+            Some(p) if snap.previews != *previews_sent => {
+                *previews_sent = snap.previews;
+                tx.send(WatchItem::Progress {
+                    sequence,
+                    progress: api::progress_view(p),
+                })
+                .await
+                .is_ok()
+            }
+            _ => true,
+        }
+    }
+
     async fn feed(self: Arc<Self>, rec: JobRecord, after: u64, tx: mpsc::Sender<WatchItem>) {
         // Subscribe before reading the log, so no event falls between the two.
         let mut live = lock(&self.live).get(&rec.id).map(|l| l.tx.subscribe());
@@ -664,31 +688,24 @@ impl Service {
                 }
             };
             for e in evs {
-                sent = e.sequence;
                 let done = e.kind == "done";
+                // The latest preview goes out before the stream ends, even when the job
+                // finished between two wake-ups of this feed (it is never persisted).
+                if done && !Self::send_preview(&tx, live.as_ref(), &mut previews_sent, sent).await {
+                    return;
+                }
+                sent = e.sequence;
                 if tx.send(WatchItem::Stored(e)).await.is_err() || done {
                     return;
                 }
+            }
+            if !Self::send_preview(&tx, live.as_ref(), &mut previews_sent, sent).await {
+                return;
             }
             let Some(rx) = live.as_mut() else { return };
             let snap = rx.borrow_and_update().clone();
             if snap.sequence > sent {
                 continue;
-            }
-            if snap.previews != previews_sent
-                && let Some(p) = &snap.last_preview
-            {
-                previews_sent = snap.previews;
-                if tx
-                    .send(WatchItem::Progress {
-                        sequence: sent,
-                        progress: api::progress_view(p),
-                    })
-                    .await
-                    .is_err()
-                {
-                    return;
-                }
             }
             if let Some(p) = &snap.progress
                 && last_step != Some((p.sample, p.step, p.phase))

@@ -199,19 +199,32 @@ pub fn generate_with(
             limit: "a projectable graph".into(),
             value: e.to_string(),
         })?;
+        let codebook = shapes.codebook.filter(|_| req.retrieval != Retrieval::Off);
+        // All: every latent code is replaced before meshing, so each part is meshed once.
+        let mut retrieved = match codebook {
+            Some(codebook) if req.retrieval == Retrieval::All => {
+                let mut replaced = Vec::new();
+                for (i, part) in object.parts.iter_mut().enumerate() {
+                    if snap_code(i, part, codebook)? {
+                        replaced.push(i);
+                    }
+                }
+                replaced
+            }
+            _ => Vec::new(),
+        };
         let mut meshes = crate::mesh::mesh_parts(&object, Some(shapes.decoder), &req.meshing)
             .map_err(meshing_err)?;
-        let retrieved = match shapes.codebook {
-            Some(codebook) if req.retrieval != Retrieval::Off => retrieve_shapes(
+        if let Some(codebook) = codebook.filter(|_| req.retrieval == Retrieval::Empty) {
+            retrieved = retrieve_shapes(
                 &mut object,
                 &mut meshes,
                 shapes.decoder,
                 codebook,
-                req.retrieval,
+                Retrieval::Empty,
                 &req.meshing,
-            )?,
-            _ => Vec::new(),
-        };
+            )?;
+        }
         out.push(Generated {
             index: i,
             seed,
@@ -248,24 +261,35 @@ pub fn retrieve_shapes(
         return Ok(replaced);
     }
     for (i, (part, mesh)) in object.parts.iter_mut().zip(meshes.iter_mut()).enumerate() {
-        let PartShape::Latent(code) = &part.shape else {
-            continue;
-        };
         if mode == Retrieval::Empty && !mesh.triangles.is_empty() {
             continue;
         }
-        let Some((row, _)) = codebook.nearest(code) else {
-            return Err(EngineError::Invalid {
-                field: format!("part {i} shape code"),
-                limit: format!("{} values (the codebook's latent size)", codebook.latent()),
-                value: code.len().to_string(),
-            });
-        };
-        part.shape = PartShape::Latent(codebook.row(row).to_vec());
-        *mesh = part_mesh(part, Some(decoder), meshing).map_err(meshing_err)?;
-        replaced.push(i);
+        if snap_code(i, part, codebook)? {
+            *mesh = part_mesh(part, Some(decoder), meshing).map_err(meshing_err)?;
+            replaced.push(i);
+        }
     }
     Ok(replaced)
+}
+
+/// Replace part `i`'s latent code by its nearest codebook code; false for analytic shapes.
+fn snap_code(
+    i: usize,
+    part: &mut crate::object::Part,
+    codebook: &Codebook,
+) -> Result<bool, EngineError> {
+    let PartShape::Latent(code) = &part.shape else {
+        return Ok(false);
+    };
+    let Some((row, _)) = codebook.nearest(code) else {
+        return Err(EngineError::Invalid {
+            field: format!("part {i} shape code"),
+            limit: format!("{} values (the codebook's latent size)", codebook.latent()),
+            value: code.len().to_string(),
+        });
+    };
+    part.shape = PartShape::Latent(codebook.row(row).to_vec());
+    Ok(true)
 }
 
 #[cfg(test)]

@@ -527,3 +527,47 @@ fn overlap_energy_equals_the_sum_over_every_point_in_value_and_gradient() {
         assert!((a - p).abs() <= 1e-4 * a.abs().max(1e-3), "{a} vs {p}");
     }
 }
+
+#[test]
+fn pruned_point_cloud_loss_equals_the_dense_one_in_value_and_gradient() {
+    let field = mixed();
+    let ad = cpu_autodiff();
+    let mut rng = Rng::new(21);
+    let pts: Vec<[f32; 3]> = (0..300)
+        .map(|_| std::array::from_fn(|_| rng.range(-0.8, 1.0) as f32))
+        .collect();
+    // õ = 0 everywhere (an early, untrained x̂₀): logits of −10⁹·d², where the softmax shift
+    // must come from the differentiable pass itself.
+    let mut ghost = busy();
+    for i in 0..K {
+        ghost.node_mut(i)[node_ch::EXIST] = 0.0;
+    }
+    for (g, tau) in [(&busy(), 1000.0f32), (&busy(), 10.0), (&ghost, 1000.0)] {
+        let run = |pruned: bool| -> (f32, Vec<f32>) {
+            let (n, e) = tensors(g, &ad);
+            let n = n.require_grad();
+            let d = decode(n.clone(), e, field.latent());
+            let l = if pruned {
+                pc::loss(&field, &d.parts, d.exist.clone(), &pts, tau)
+            } else {
+                pc::loss_dense(&field, &d.parts, d.exist.clone(), &pts, tau)
+            };
+            let value = l.clone().into_scalar::<f32>();
+            let grads = l.backward();
+            let gn: Vec<f32> = n.grad(&grads).unwrap().into_data().try_to_vec().unwrap();
+            (value, gn)
+        };
+        let (vd, gd) = run(false);
+        let (vp, gp) = run(true);
+        assert!(vd > 0.0);
+        assert!((vd - vp).abs() <= 1e-5 * vd, "τ {tau}: {vd} vs {vp}");
+        let scale = gd.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        assert!(scale > 0.0);
+        for (k, (a, p)) in gd.iter().zip(&gp).enumerate() {
+            assert!(
+                (a - p).abs() <= 1e-4 * scale,
+                "τ {tau}, node channel {k}: {a} vs {p}"
+            );
+        }
+    }
+}

@@ -83,6 +83,10 @@ pub struct SubmitArgs {
     /// codebook), off, empty or all.
     #[arg(long, env = "PHYSNAP_RETRIEVAL", value_parser = ["auto", "off", "empty", "all"])]
     retrieval: Option<String>,
+    /// Classifier-free category guidance w in [0, 20] with --category (server default 2;
+    /// 0: plain conditioning).
+    #[arg(long, env = "PHYSNAP_CATEGORY_GUIDANCE")]
+    category_guidance: Option<f64>,
     /// Idempotency key (a retry with the same key returns the same job).
     #[arg(long, env = "PHYSNAP_REQUEST_ID", default_value = "")]
     request_id: String,
@@ -160,6 +164,7 @@ pub fn submit(a: SubmitArgs) -> anyhow::Result<()> {
             eta: a.eta,
             steps: a.steps,
             retrieval: a.retrieval.clone().unwrap_or_default(),
+            category_guidance: a.category_guidance,
             ..Default::default()
         };
         let job = cl

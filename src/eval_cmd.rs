@@ -128,24 +128,16 @@ pub fn cloud_references(
         .collect()
 }
 
+/// Draw `req.samples` objects for `req` (its category name filled in from the manifest).
 fn sample_set(
     models: &LoadedModels,
-    category: Option<usize>,
-    samples: usize,
-    seed: u64,
-    resolution: usize,
-    retrieval: Retrieval,
+    req: GenerateRequest,
     pb: &indicatif::ProgressBar,
 ) -> anyhow::Result<Vec<Generated>> {
     let decoder = LatentSdfDecoder::new(&models.shape_prior.decoder);
     let req = GenerateRequest {
-        seed,
-        samples,
-        category,
-        category_name: category.map(|i| models.manifest.categories[i].clone()),
-        meshing: MeshingOptions { resolution },
-        retrieval,
-        ..Default::default()
+        category_name: req.category.map(|i| models.manifest.categories[i].clone()),
+        ..req
     };
     Ok(run_generate(
         &models.denoiser,
@@ -212,29 +204,29 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
         };
     let retrieval = super::model_cmd::retrieval_mode(&a.retrieval, &models)?;
     let pb = super::progress_bar(total_samples, "sample");
-    let uncond = sample_set(
-        &models,
-        None,
-        a.samples,
-        a.seed,
-        a.resolution,
+    let base = GenerateRequest {
+        seed: a.seed,
+        samples: a.samples,
+        meshing: MeshingOptions {
+            resolution: a.resolution,
+        },
         retrieval,
-        &pb,
-    )?;
+        ..Default::default()
+    };
+    let uncond = sample_set(&models, base.clone(), &pb)?;
     let mut cond: Vec<(String, Generated)> = Vec::new();
     if conditional {
         for (ci, c) in cats.iter().enumerate() {
             let idx = category_index(c).with_context(|| format!("unknown category {c:?}"))?;
             let seed = a.seed + 1_000_000 * (ci as u64 + 1);
-            for g in sample_set(
-                &models,
-                Some(idx),
-                a.per_category,
+            let req = GenerateRequest {
                 seed,
-                a.resolution,
-                retrieval,
-                &pb,
-            )? {
+                samples: a.per_category,
+                category: Some(idx),
+                category_guidance: a.category_guidance,
+                ..base.clone()
+            };
+            for g in sample_set(&models, req, &pb)? {
                 cond.push((c.clone(), g));
             }
         }
@@ -397,6 +389,7 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
         "id": { "states": a.states, "points": a.points },
         "meshing_resolution": a.resolution,
         "retrieval": retrieval.as_str(),
+        "category_guidance": a.category_guidance,
         "unconditional": {
             "retrieved_samples": retrieved_samples,
             "retrieved_parts": retrieved_parts,

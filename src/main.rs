@@ -124,6 +124,10 @@ struct EvalGenerativeArgs {
     /// Also write the report as JSON here.
     #[arg(long, env = "PHYSNAP_EVAL_OUT")]
     out: Option<PathBuf>,
+    /// Classifier-free category guidance w for category-conditioned samples:
+    /// ε̂ = ε̂(c) + w·(ε̂(c) − ε̂(∅)) (0: plain conditioning; > 0 doubles the denoiser's work).
+    #[arg(long, env = "PHYSNAP_CATEGORY_GUIDANCE", default_value_t = physnap::engine::sample::DEFAULT_CATEGORY_GUIDANCE)]
+    category_guidance: f64,
     /// Record the report under `metrics` in the weights' manifest.json.
     #[arg(long, env = "PHYSNAP_EVAL_WRITE_MANIFEST")]
     write_manifest: bool,
@@ -299,6 +303,10 @@ struct SamplingArgs {
     /// empty), all (every latent shape: NAP's retrieval variant).
     #[arg(long, env = "PHYSNAP_RETRIEVAL", default_value = "auto", value_parser = ["auto", "off", "empty", "all"])]
     retrieval: String,
+    /// Classifier-free category guidance w for category-conditioned samples:
+    /// ε̂ = ε̂(c) + w·(ε̂(c) − ε̂(∅)) (0: plain conditioning; > 0 doubles the denoiser's work).
+    #[arg(long, env = "PHYSNAP_CATEGORY_GUIDANCE", default_value_t = physnap::engine::sample::DEFAULT_CATEGORY_GUIDANCE)]
+    category_guidance: f64,
 }
 
 #[derive(Args, Debug)]

@@ -766,6 +766,8 @@ async fn guided_ddim_job_streams_losses_and_ranks_best_of_n() {
     );
     // auto retrieval resolves to off for weights without a codebook.
     assert_eq!(req["retrieval"], "off", "{req}");
+    // No category: no category guidance.
+    assert_eq!(req["category_guidance"].as_f64(), Some(0.0), "{req}");
     // Unset weights follow the paper's rule: w_pen = w_mob = 2 / 3.
     assert!(
         (req["w_pen"].as_f64().unwrap() - 2.0 / 3.0).abs() < 1e-12,
@@ -863,6 +865,13 @@ async fn guidance_and_sampler_fields_are_validated() {
         (json!({"retrieval": "nearest"}), "retrieval", "\"nearest\""),
         // The test weights have no codebook: only off / auto are possible.
         (json!({"retrieval": "empty"}), "retrieval", "\"empty\""),
+        (
+            json!({"category_guidance": 25.0}),
+            "category_guidance",
+            "25",
+        ),
+        // Category guidance needs a category to extrapolate from.
+        (json!({"category_guidance": 2.0}), "category_guidance", "2"),
     ];
     for (extra, field, value) in cases {
         let mut b = json!({"points": points_json(32)});

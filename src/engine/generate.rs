@@ -94,6 +94,8 @@ pub struct GenerateRequest {
     pub steps: usize,
     /// Which part shapes are replaced by their nearest codebook code.
     pub retrieval: Retrieval,
+    /// Classifier-free category guidance weight; see [`SampleRequest::category_guidance`].
+    pub category_guidance: f64,
 }
 
 /// One generated sample.
@@ -175,6 +177,7 @@ pub fn generate_with(
                 guidance: req.guidance.clone(),
                 sampler: req.sampler,
                 steps: req.steps,
+                category_guidance: req.category_guidance,
             },
             shapes.field.map(|field| GuidanceContext { field, scales }),
             &device,

@@ -265,6 +265,8 @@ pub struct TableOptions {
     pub id: IdOptions,
     /// Which part shapes are replaced by their nearest codebook code (needs a codebook).
     pub retrieval: Retrieval,
+    /// Classifier-free category guidance of the category-aware rows.
+    pub category_guidance: f64,
 }
 
 /// One row of Table 1: medians over all samples of all clouds.
@@ -591,6 +593,7 @@ pub fn run_rows(
                         sampler: opts.sampler,
                         steps: opts.steps,
                         retrieval: opts.retrieval,
+                        category_guidance: opts.category_guidance,
                         ..Default::default()
                     };
                     let shapes = PartShapes {
@@ -858,6 +861,7 @@ mod tests {
             references: Vec::new(),
             id: IdOptions::default(),
             retrieval: Retrieval::Off,
+            category_guidance: 0.0,
         };
         let mut calls = 0;
         let rows = guided_table(

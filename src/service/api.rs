@@ -91,6 +91,10 @@ pub struct JobRequest {
     /// that mesh empty) or `all` (NAP's retrieval variant).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub retrieval: Option<String>,
+    /// Classifier-free category guidance w in [0, 20] (jobs with a category only):
+    /// ε̂ = ε̂(c) + w·(ε̂(c) − ε̂(∅)). Default 2 with a category; 0 = plain conditioning.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub category_guidance: Option<f64>,
 }
 
 /// Query parameters of a raw upload (`POST /v1/jobs` with a PLY, NPY or f32le body): the same
@@ -131,6 +135,8 @@ pub struct UploadParams {
     pub resolution: Option<u32>,
     /// Codebook retrieval (`auto`, `off`, `empty`, `all`).
     pub retrieval: Option<String>,
+    /// Classifier-free category guidance w.
+    pub category_guidance: Option<f64>,
 }
 
 impl JobRequest {
@@ -184,6 +190,7 @@ impl JobRequest {
             preview_every: self.preview_every,
             resolution: self.resolution,
             retrieval: self.retrieval,
+            category_guidance: self.category_guidance,
         })
     }
 }
@@ -209,6 +216,7 @@ impl UploadParams {
             preview_every: self.preview_every,
             resolution: self.resolution,
             retrieval: self.retrieval,
+            category_guidance: self.category_guidance,
         }
     }
 }
@@ -250,6 +258,8 @@ pub struct RequestView {
     pub resolution: u32,
     /// Codebook retrieval as run: `off`, `empty` or `all` (`auto` resolved).
     pub retrieval: String,
+    /// Classifier-free category guidance w as run (0 without a category).
+    pub category_guidance: f64,
     /// Whether guidance is applied (some weight > 0); false = plain NAP sampling.
     pub guided: bool,
 }
@@ -465,6 +475,7 @@ pub fn request_view(s: &JobSpec) -> RequestView {
         preview_every: s.preview_every,
         resolution: s.resolution,
         retrieval: s.retrieval.clone(),
+        category_guidance: s.category_guidance,
         guided: s.guided(),
     }
 }

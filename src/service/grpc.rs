@@ -148,6 +148,7 @@ pub fn input_of(spec: pb::JobSpec) -> JobInput {
         preview_every: spec.preview_every,
         resolution: spec.resolution,
         retrieval: Some(spec.retrieval).filter(|s| !s.is_empty()),
+        category_guidance: spec.category_guidance,
     }
 }
 

@@ -239,6 +239,7 @@ fn ranking_json(spec: &JobSpec, guidance: &Option<GuidanceOptions>, rows: &[Rank
         })),
         "sampler": spec.sampler, "eta": spec.eta, "steps": spec.steps,
         "retrieval": spec.retrieval,
+        "category_guidance": spec.category_guidance,
         "best": best,
         "samples": rows.iter().enumerate().map(|(rank, r)| serde_json::json!({
             "rank": rank + 1,
@@ -279,6 +280,7 @@ pub fn run_job(
         sampler: spec.engine_sampler(),
         steps: spec.steps as usize,
         retrieval: spec.engine_retrieval(),
+        category_guidance: spec.category_guidance,
     };
     let decoder = LatentSdfDecoder::new(&m.shape_prior.decoder);
     let started = Instant::now();

@@ -12,8 +12,8 @@ use crate::engine::generate::Retrieval;
 use crate::engine::guidance::{
     DEFAULT_GUIDED_STEPS, DEFAULT_MAX_STEP, DEFAULT_TAU, GuidanceOptions, Terms,
 };
-use crate::engine::sample::DEFAULT_STEPS;
 use crate::engine::sample::Sampler;
+use crate::engine::sample::{DEFAULT_CATEGORY_GUIDANCE, DEFAULT_STEPS, MAX_CATEGORY_GUIDANCE};
 use crate::engine::schedule::timesteps;
 use crate::pointcloud::{Format, Limits as CloudLimits, PointCloud, PointCloudError};
 
@@ -69,6 +69,8 @@ pub struct JobInput {
     pub resolution: Option<u32>,
     /// Codebook retrieval of part shapes (`auto`, `off`, `empty`, `all`).
     pub retrieval: Option<String>,
+    /// Classifier-free category guidance w (with a category only).
+    pub category_guidance: Option<f64>,
 }
 
 /// NAP's DDPM (strided ancestral sampling when fewer steps than the schedule are asked for).
@@ -163,6 +165,9 @@ pub struct JobSpec {
     pub resolution: u32,
     /// Codebook retrieval of part shapes: `off`, `empty` or `all` (`auto` is resolved).
     pub retrieval: String,
+    /// Classifier-free category guidance w (0 without a category or for an unconditional
+    /// model).
+    pub category_guidance: f64,
 }
 
 /// Largest τ accepted (the engine's limit).
@@ -499,6 +504,26 @@ pub fn validate(
             Some(_) => r.to_string(),
         },
     };
+    // Classifier-free category guidance: the default with a category, 0 without one.
+    let category_guidance = match (input.category_guidance, &category) {
+        (Some(w), _) if !(w.is_finite() && (0.0..=MAX_CATEGORY_GUIDANCE).contains(&w)) => {
+            return Err(violation(
+                "category_guidance",
+                format!("finite, in [0, {MAX_CATEGORY_GUIDANCE}]"),
+                w,
+            ));
+        }
+        (Some(w), None) if w > 0.0 => {
+            return Err(violation(
+                "category_guidance",
+                "0 or absent without a category",
+                w,
+            ));
+        }
+        (_, None) => 0.0,
+        (Some(w), Some(_)) => w,
+        (None, Some(_)) => DEFAULT_CATEGORY_GUIDANCE,
+    };
     Ok(JobSpec {
         points,
         category,
@@ -517,6 +542,7 @@ pub fn validate(
         preview_every,
         resolution,
         retrieval,
+        category_guidance,
     })
 }
 
@@ -535,6 +561,26 @@ mod tests {
 
     fn cloud(n: usize) -> PointsInput {
         PointsInput::Triples((0..n).map(|i| [i as f64, 0.0, 1.0]).collect())
+    }
+
+    #[test]
+    fn category_guidance_defaults_with_a_category_and_is_zero_without() {
+        let run = |cat: Option<&str>, w: Option<f64>| {
+            let input = JobInput {
+                points: Some(cloud(16)),
+                category: cat.map(str::to_string),
+                category_guidance: w,
+                ..Default::default()
+            };
+            validate(&input, &caps(), &Limits::default(), 1)
+                .unwrap()
+                .category_guidance
+        };
+        assert_eq!(run(None, None), 0.0);
+        assert_eq!(run(None, Some(0.0)), 0.0);
+        assert_eq!(run(Some("Door"), None), DEFAULT_CATEGORY_GUIDANCE);
+        assert_eq!(run(Some("Door"), Some(0.0)), 0.0);
+        assert_eq!(run(Some("Door"), Some(4.5)), 4.5);
     }
 
     #[test]
@@ -710,6 +756,22 @@ mod tests {
             assert_eq!((v.field.as_str(), v.value.as_str()), ("tau", shown));
             assert!(v.limit.contains("> 0"), "{v}");
         }
+        for (w, shown) in [(-0.5, "-0.5"), (21.0, "21"), (f64::INFINITY, "inf")] {
+            let v = bad(&|i| {
+                i.category = Some("Door".into());
+                i.category_guidance = Some(w);
+            });
+            assert_eq!(
+                (v.field.as_str(), v.value.as_str()),
+                ("category_guidance", shown)
+            );
+            assert!(v.limit.contains("[0, 20]"), "{v}");
+        }
+        let v = bad(&|i| i.category_guidance = Some(3.0));
+        assert_eq!(
+            (v.field.as_str(), v.limit.as_str(), v.value.as_str()),
+            ("category_guidance", "0 or absent without a category", "3")
+        );
         let v = bad(&|i| i.retrieval = Some("nearest".into()));
         assert_eq!(
             (v.field.as_str(), v.value.as_str()),

@@ -174,6 +174,9 @@ struct SpecDoc {
     /// Rows written before retrieval existed ran without it.
     #[serde(default = "retrieval_off")]
     retrieval: String,
+    /// Rows written before category guidance existed ran without it.
+    #[serde(default)]
+    category_guidance: f64,
 }
 
 fn retrieval_off() -> String {
@@ -198,6 +201,7 @@ fn spec_to_row(s: &JobSpec) -> (String, Vec<u8>) {
         preview_every: s.preview_every,
         resolution: s.resolution,
         retrieval: s.retrieval.clone(),
+        category_guidance: s.category_guidance,
     };
     let mut blob = Vec::with_capacity(s.points.len() * 12);
     for p in &s.points {
@@ -240,6 +244,7 @@ fn spec_from_row(id: &str, json: &str, blob: &[u8]) -> Result<JobSpec, StoreErro
         preview_every: d.preview_every,
         resolution: d.resolution,
         retrieval: d.retrieval,
+        category_guidance: d.category_guidance,
     })
 }
 

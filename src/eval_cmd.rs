@@ -366,6 +366,12 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
             "  category accuracy (nearest test object has the requested category): {:.1}% ({hits}/{tries})",
             100.0 * acc
         );
+        println!(
+            "  valid conditioned samples: {}/{} (category guidance w = {})",
+            cond_valid.len(),
+            cond.len(),
+            a.category_guidance
+        );
         for (c, h, t) in &per_cat {
             println!("    {c:<18} {h}/{t}");
         }
@@ -403,6 +409,8 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
         },
         "conditional": {
             "per_category": a.per_category,
+            "samples": cond.len(),
+            "valid": cond_valid.len(),
             "accuracy": cat_acc,
             "reference_loo_accuracy": ref_acc,
             "categories": per_cat.iter().map(|(c, h, t)| json!({"category": c, "hits": h, "samples": t})).collect::<Vec<_>>(),

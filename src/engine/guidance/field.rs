@@ -120,6 +120,18 @@ impl PartTensors {
     }
 }
 
+impl PartTensors {
+    /// The same values cut from the autodiff graph: for passes that only need numbers.
+    pub fn detached(&self) -> Self {
+        PartTensors {
+            boxes: self.boxes.clone().detach(),
+            centres: self.centres.clone().detach(),
+            codes: self.codes.clone().detach(),
+            kappa: self.kappa.clone().detach(),
+        }
+    }
+}
+
 /// d(p, i) for local points `u` [Q, 3] (already in part `idx[q]`'s frame) → [Q], in one field
 /// call.
 pub fn part_sdf(
@@ -154,12 +166,7 @@ pub fn overlap_energy(
     w: Tensor<1>,
 ) -> Option<Tensor<1>> {
     let nq = u.dims()[0] / 2;
-    let detached = PartTensors {
-        boxes: parts.boxes.clone().detach(),
-        centres: parts.centres.clone().detach(),
-        codes: parts.codes.clone().detach(),
-        kappa: parts.kappa.clone().detach(),
-    };
+    let detached = parts.detached();
     let d = part_sdf(field, &detached, idx.clone(), u.clone().detach())
         .into_data()
         .try_to_vec::<f32>()

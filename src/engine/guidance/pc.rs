@@ -81,12 +81,7 @@ pub fn loss(
     let m = points.len();
     let (u, idx) = all_pairs(parts, points);
     // Pass 1, no gradient: every d_ij and the logits on the host.
-    let detached = PartTensors {
-        boxes: parts.boxes.clone().detach(),
-        centres: parts.centres.clone().detach(),
-        codes: parts.codes.clone().detach(),
-        kappa: parts.kappa.clone().detach(),
-    };
+    let detached = parts.detached();
     let host = |t: Tensor<1>| t.into_data().try_to_vec::<f32>().unwrap_or_default();
     let d = host(part_sdf(field, &detached, idx.clone(), u.clone().detach()));
     let o: Vec<f32> = host(exist.clone().detach().clamp(0.0, 1.0))

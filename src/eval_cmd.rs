@@ -223,7 +223,7 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
                 seed,
                 samples: a.per_category,
                 category: Some(idx),
-                category_guidance: a.category_guidance,
+                category_guidance: a.category.category_guidance,
                 ..base.clone()
             };
             for g in sample_set(&models, req, &pb)? {
@@ -370,7 +370,7 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
             "  valid conditioned samples: {}/{} (category guidance w = {})",
             cond_valid.len(),
             cond.len(),
-            a.category_guidance
+            a.category.category_guidance
         );
         for (c, h, t) in &per_cat {
             println!("    {c:<18} {h}/{t}");
@@ -395,7 +395,7 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
         "id": { "states": a.states, "points": a.points },
         "meshing_resolution": a.resolution,
         "retrieval": retrieval.as_str(),
-        "category_guidance": a.category_guidance,
+        "category_guidance": a.category.category_guidance,
         "unconditional": {
             "retrieved_samples": retrieved_samples,
             "retrieved_parts": retrieved_parts,

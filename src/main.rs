@@ -124,10 +124,9 @@ struct EvalGenerativeArgs {
     /// Also write the report as JSON here.
     #[arg(long, env = "PHYSNAP_EVAL_OUT")]
     out: Option<PathBuf>,
-    /// Classifier-free category guidance w for category-conditioned samples:
-    /// ε̂ = ε̂(c) + w·(ε̂(c) − ε̂(∅)) (0: plain conditioning; > 0 doubles the denoiser's work).
-    #[arg(long, env = "PHYSNAP_CATEGORY_GUIDANCE", default_value_t = physnap::engine::sample::DEFAULT_CATEGORY_GUIDANCE)]
-    category_guidance: f64,
+    /// Category guidance.
+    #[command(flatten)]
+    category: CategoryGuidanceArgs,
     /// Record the report under `metrics` in the weights' manifest.json.
     #[arg(long, env = "PHYSNAP_EVAL_WRITE_MANIFEST")]
     write_manifest: bool,
@@ -275,6 +274,15 @@ struct GenerateArgs {
     sampling: SamplingArgs,
 }
 
+/// The category-guidance flag of every command that samples locally.
+#[derive(Args, Debug)]
+struct CategoryGuidanceArgs {
+    /// Classifier-free category guidance w for category-conditioned samples:
+    /// ε̂ = ε̂(c) + w·(ε̂(c) − ε̂(∅)) (0: plain conditioning; > 0 doubles the denoiser's work).
+    #[arg(long, env = "PHYSNAP_CATEGORY_GUIDANCE", default_value_t = physnap::engine::sample::DEFAULT_CATEGORY_GUIDANCE)]
+    category_guidance: f64,
+}
+
 /// Sampler and guidance-schedule flags shared by `generate` and `eval guided`.
 #[derive(Args, Debug)]
 struct SamplingArgs {
@@ -303,10 +311,9 @@ struct SamplingArgs {
     /// empty), all (every latent shape: NAP's retrieval variant).
     #[arg(long, env = "PHYSNAP_RETRIEVAL", default_value = "auto", value_parser = ["auto", "off", "empty", "all"])]
     retrieval: String,
-    /// Classifier-free category guidance w for category-conditioned samples:
-    /// ε̂ = ε̂(c) + w·(ε̂(c) − ε̂(∅)) (0: plain conditioning; > 0 doubles the denoiser's work).
-    #[arg(long, env = "PHYSNAP_CATEGORY_GUIDANCE", default_value_t = physnap::engine::sample::DEFAULT_CATEGORY_GUIDANCE)]
-    category_guidance: f64,
+    /// Category guidance.
+    #[command(flatten)]
+    category: CategoryGuidanceArgs,
 }
 
 #[derive(Args, Debug)]

@@ -244,7 +244,7 @@ pub fn generate(a: GenerateArgs) -> anyhow::Result<()> {
         sampler,
         steps: a.sampling.steps,
         retrieval: retrieval_mode(&a.sampling.retrieval, &models)?,
-        category_guidance: a.sampling.category_guidance,
+        category_guidance: a.sampling.category.category_guidance,
         ..Default::default()
     };
     req.meshing.validate()?;
@@ -565,7 +565,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
             points: a.id_points,
         },
         retrieval: retrieval_mode(&a.sampling.retrieval, &models)?,
-        category_guidance: a.sampling.category_guidance,
+        category_guidance: a.sampling.category.category_guidance,
     };
     opts.id.validate()?;
     let per_cloud = if a.refs_per_cloud == 0 {
@@ -644,7 +644,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         "seed": a.seed, "guidance_steps": a.sampling.guidance_steps, "tau": a.sampling.tau,
         "guidance_max_step": opts.max_step,
         "sampler": a.sampling.sampler, "steps": a.sampling.steps, "eta": a.sampling.eta,
-        "category_guidance": a.sampling.category_guidance,
+        "category_guidance": a.sampling.category.category_guidance,
         "statistic": "E_* and D_pc: median over all samples; MMD and 1-NNA: per cloud (its samples vs its references), median over clouds",
         "references": a.data.as_ref().map(|d| serde_json::json!({
             "data": d.display().to_string(), "per_cloud": per_cloud,

@@ -226,9 +226,9 @@ pub fn sample_guided(
         .category
         .map(|c| Tensor::<1, Int>::from_data(TensorData::new(vec![c as i64; b], [b]), device));
     // Classifier-free guidance: the conditional and the "no category" batch in one forward.
-    let cfg = (req.category_guidance > 0.0 && model.config().categories > 0)
-        .then_some(req.category)
-        .flatten()
+    let cfg = req
+        .category
+        .filter(|_| req.category_guidance > 0.0 && model.config().categories > 0)
         .map(|c| {
             let mut idx = vec![c as i64; b];
             idx.extend(vec![model.config().categories as i64; b]);

@@ -165,8 +165,7 @@ pub struct JobSpec {
     pub resolution: u32,
     /// Codebook retrieval of part shapes: `off`, `empty` or `all` (`auto` is resolved).
     pub retrieval: String,
-    /// Classifier-free category guidance w (0 without a category or for an unconditional
-    /// model).
+    /// Classifier-free category guidance w (0 without a category).
     pub category_guidance: f64,
 }
 

@@ -8,6 +8,7 @@
 
 pub mod codebook;
 pub mod denoiser;
+pub mod host_decoder;
 pub mod shape_prior;
 
 use burn::tensor::Device;

@@ -23,6 +23,7 @@ use burn::tensor::activation::{leaky_relu, relu};
 use burn::tensor::{Device, Tensor, TensorData};
 
 use super::ModelError;
+use super::host_decoder::HostDecoder;
 use crate::data::rng::Rng;
 use crate::shape::{LatentDecoder, Sdf};
 
@@ -315,23 +316,24 @@ impl ShapePrior {
     }
 }
 
-/// Points per decoder call when meshing (bounds the activations: ~hidden × 4 B × this × a few).
-pub const MESH_CHUNK: usize = 1 << 16;
-
 /// A (non-autodiff) decoder as a [`LatentDecoder`], so `mesh::part_mesh` can mesh latent parts.
 ///
-/// Each [`Sdf::eval_batch`] call is one decoder call per [`MESH_CHUNK`] points. Safe to share
-/// across threads (the mesher evaluates z-slabs in parallel); burn modules are `Sync`.
+/// Holds the burn module (for differentiable guidance queries) and its value-only copy
+/// ([`HostDecoder`], for meshing and every pass that needs no gradient). Safe to share across
+/// threads (the mesher evaluates z-slabs in parallel); burn modules are `Sync`.
 #[derive(Debug, Clone)]
 pub struct LatentSdfDecoder {
     decoder: ShapeDecoder,
+    host: HostDecoder,
 }
 
 impl LatentSdfDecoder {
     /// Wrap `decoder`; it is put into inference mode ([`Module::valid`], no autodiff graph).
     pub fn new(decoder: &ShapeDecoder) -> Self {
+        let decoder = decoder.valid();
         LatentSdfDecoder {
-            decoder: decoder.valid(),
+            host: HostDecoder::new(&decoder),
+            decoder,
         }
     }
 
@@ -339,34 +341,29 @@ impl LatentSdfDecoder {
     pub fn decoder(&self) -> &ShapeDecoder {
         &self.decoder
     }
+
+    /// Its value-only copy.
+    pub fn host(&self) -> &HostDecoder {
+        &self.host
+    }
 }
 
-/// The SDF of one code: the code features are computed once, points are decoded in chunks.
+/// The SDF of one code: the code features are computed once, points are decoded by the
+/// value-only decoder.
 struct CodeSdf<'a> {
-    decoder: &'a ShapeDecoder,
-    /// [1, hidden], or `None` when the code had the wrong length (SDF = NaN: meshes empty).
-    features: Option<Tensor<2>>,
+    decoder: &'a HostDecoder,
+    /// [hidden], or `None` when the code had the wrong length (SDF = NaN: meshes empty).
+    features: Option<Vec<f32>>,
 }
 
 impl Sdf for CodeSdf<'_> {
     fn eval_batch(&self, points: &[[f32; 3]], out: &mut [f32]) {
-        let Some(features) = &self.features else {
-            out.fill(f32::NAN);
-            return;
-        };
-        let device = features.device();
-        for (pts, o) in points.chunks(MESH_CHUNK).zip(out.chunks_mut(MESH_CHUNK)) {
-            let flat: Vec<f32> = pts.iter().flatten().copied().collect();
-            let t = Tensor::<3>::from_data(TensorData::new(flat, [1, pts.len(), 3]), &device);
-            let v = self
-                .decoder
-                .sdf_with_features(t, features.clone())
-                .into_data()
-                .try_into_vec::<f32>();
-            match v {
-                Ok(v) => o.copy_from_slice(&v),
-                Err(_) => o.fill(f32::NAN),
+        match &self.features {
+            Some(features) => {
+                let idx = vec![0; points.len()];
+                self.decoder.eval(points, features, &idx, out);
             }
+            None => out.fill(f32::NAN),
         }
     }
 }
@@ -377,9 +374,7 @@ impl LatentDecoder for LatentSdfDecoder {
     fn sdf<'a>(&'a self, code: &'a [f32]) -> Box<dyn Sdf + 'a> {
         let latent = self.decoder.latent();
         let features = if code.len() == latent {
-            let device = self.decoder.fc_c.weight.val().device();
-            let z = Tensor::<2>::from_data(TensorData::new(code.to_vec(), [1, latent]), &device);
-            Some(self.decoder.code_features(z))
+            Some(self.host.code_features(code))
         } else {
             tracing::warn!(
                 expected = latent,
@@ -389,7 +384,7 @@ impl LatentDecoder for LatentSdfDecoder {
             None
         };
         Box::new(CodeSdf {
-            decoder: &self.decoder,
+            decoder: &self.host,
             features,
         })
     }
@@ -403,7 +398,7 @@ const _: () = {
 };
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::model::{cpu, cpu_autodiff};
 
@@ -496,7 +491,7 @@ mod tests {
     }
 
     /// Randomise every parameter (the residual blocks' zero init would hide their gradients).
-    fn randomised(decoder: ShapeDecoder, seed: u64) -> ShapeDecoder {
+    pub(crate) fn randomised(decoder: ShapeDecoder, seed: u64) -> ShapeDecoder {
         struct Mapper(Rng);
         impl burn::module::ModuleMapper for Mapper {
             fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
@@ -612,6 +607,13 @@ mod tests {
                     );
                     let _ = to_vec(dec.sdf(x, z));
                 });
+                let host = crate::model::host_decoder::HostDecoder::new(&dec);
+                let q: Vec<[f32; 3]> = pts.chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+                let idx: Vec<usize> = (0..p * n).map(|r| r / n).collect();
+                let mut out = vec![0.0f32; p * n];
+                let fwd_host = median_secs(9, || {
+                    host.eval(&q, &host.code_features(&codes), &idx, &mut out);
+                });
                 let ad = cpu_autodiff();
                 let dec_ad = dec.clone().fork(&ad).no_grad();
                 let bwd = median_secs(9, || {
@@ -628,9 +630,11 @@ mod tests {
                 });
                 let total = (p * n) as f64;
                 println!(
-                    "decoder {name} P={p} N={n}: fwd {:.0} points/s ({:.1} ms), fwd+bwd(points, codes) {:.0} points/s ({:.1} ms), threads {}",
+                    "decoder {name} P={p} N={n}: fwd {:.0} points/s ({:.1} ms), host fwd {:.0} points/s ({:.1} ms), fwd+bwd(points, codes) {:.0} points/s ({:.1} ms), threads {}",
                     total / fwd,
                     fwd * 1e3,
+                    total / fwd_host,
+                    fwd_host * 1e3,
                     total / bwd,
                     bwd * 1e3,
                     rayon::current_num_threads()

@@ -30,6 +30,29 @@ pub trait SdfField {
     /// f at normalised points `q` [Q, 3] for the codes `codes[idx[q]]` (`codes` [P, F],
     /// `idx` [Q]) → [Q]. Must be differentiable in `q` and `codes`.
     fn sdf(&self, q: Tensor<2>, codes: Tensor<2>, idx: Tensor<1, Int>) -> Tensor<1>;
+
+    /// The values of [`SdfField::sdf`] without gradient, host in and out: `q` [Q], `codes`
+    /// [P × F] flat, `idx` [Q]. The default goes through `sdf` on the inference device; the
+    /// learned decoder overrides it with its faster value-only path.
+    fn sdf_values(&self, q: &[[f32; 3]], codes: &[f32], idx: &[usize]) -> Vec<f32> {
+        let device = crate::model::cpu();
+        let n = q.len();
+        let f = self.latent().max(1);
+        let flat: Vec<f32> = q.iter().flatten().copied().collect();
+        let q = Tensor::<2>::from_data(TensorData::new(flat, [n, 3]), &device);
+        let codes = Tensor::<2>::from_data(
+            TensorData::new(codes.to_vec(), [codes.len() / f, f]),
+            &device,
+        );
+        let idx = Tensor::<1, Int>::from_data(
+            TensorData::new(idx.iter().map(|&i| i as i64).collect::<Vec<i64>>(), [n]),
+            &device,
+        );
+        self.sdf(q, codes, idx)
+            .into_data()
+            .try_to_vec::<f32>()
+            .unwrap_or_else(|_| vec![f32::NAN; n])
+    }
 }
 
 impl SdfField for ShapeDecoder {
@@ -53,6 +76,13 @@ impl SdfField for LatentSdfDecoder {
 
     fn sdf(&self, q: Tensor<2>, codes: Tensor<2>, idx: Tensor<1, Int>) -> Tensor<1> {
         SdfField::sdf(self.decoder(), q, codes, idx)
+    }
+
+    fn sdf_values(&self, q: &[[f32; 3]], codes: &[f32], idx: &[usize]) -> Vec<f32> {
+        let host = self.host();
+        let mut out = vec![0.0; q.len()];
+        host.eval(q, &host.code_features(codes), idx, &mut out);
+        out
     }
 }
 
@@ -120,15 +150,27 @@ impl PartTensors {
     }
 }
 
+/// Host copies of [`PartTensors`] for the value-only passes ([`part_sdf_values`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PartValues {
+    /// Half-extents (clamped as in [`PartTensors::boxes`]).
+    pub boxes: Vec<[f32; 3]>,
+    /// κ per part.
+    pub kappa: Vec<f32>,
+    /// Codes [K × F] flat.
+    pub codes: Vec<f32>,
+}
+
 impl PartTensors {
-    /// The same values cut from the autodiff graph: for passes that only need numbers.
-    pub fn detached(&self) -> Self {
-        PartTensors {
-            boxes: self.boxes.clone().detach(),
-            centres: self.centres.clone().detach(),
-            codes: self.codes.clone().detach(),
-            kappa: self.kappa.clone().detach(),
-        }
+    /// Host copies of the values (None if a tensor cannot be read as f32).
+    pub fn values(&self) -> Option<PartValues> {
+        let host = |t: Tensor<2>| t.detach().into_data().try_to_vec::<f32>().ok();
+        let boxes = host(self.boxes.clone())?;
+        Some(PartValues {
+            boxes: boxes.chunks(3).map(|c| [c[0], c[1], c[2]]).collect(),
+            kappa: host(self.kappa.clone())?,
+            codes: host(self.codes.clone())?,
+        })
     }
 }
 
@@ -149,28 +191,55 @@ pub fn part_sdf(
     outside + kappa.reshape([n]) * f
 }
 
+/// [`part_sdf`] without gradient on host values: d(u_q, idx[q]) for local points `u` [Q] (in
+/// part `idx[q]`'s frame) → [Q], in one [`SdfField::sdf_values`] call.
+pub fn part_sdf_values(
+    field: &dyn SdfField,
+    parts: &PartValues,
+    idx: &[usize],
+    u: &[[f32; 3]],
+) -> Vec<f32> {
+    let mut outside = Vec::with_capacity(u.len());
+    let q: Vec<[f32; 3]> = u
+        .iter()
+        .zip(idx)
+        .map(|(u, &i)| {
+            let (b, kappa) = (parts.boxes[i], parts.kappa[i]);
+            let c: [f32; 3] = std::array::from_fn(|k| u[k].max(-b[k]).min(b[k]));
+            let r2: f32 = (0..3).map(|k| (u[k] - c[k]).powi(2)).sum();
+            outside.push((r2 + NORM_EPS * NORM_EPS).sqrt() - NORM_EPS);
+            c.map(|v| v / kappa)
+        })
+        .collect();
+    let f = field.sdf_values(&q, &parts.codes, idx);
+    outside
+        .iter()
+        .zip(idx)
+        .zip(f)
+        .map(|((o, &i), f)| o + parts.kappa[i] * f)
+        .collect()
+}
+
 /// The pair-overlap energy ψ = ½·max(0, −(d_i + d_j))² (grid.rs) summed with per-point weights
 /// `w` [Q], for the point batch `u` = [Q points in part i's frame; the same Q points in part
-/// j's frame] with part indices `idx` [2Q] — computed only where the parts overlap.
+/// j's frame] with part indices `idx` [2Q] (host) — computed only where the parts overlap.
 ///
 /// Why: ψ and its gradient are exactly 0 wherever d_i + d_j ≥ 0, and in ℓ_pen / ℓ_mob that is
-/// most of the integration grid. A pass without gradient (detached inputs, no autodiff graph)
+/// most of the integration grid. A pass without gradient ([`part_sdf_values`] on host copies)
 /// finds the overlapping points; the differentiable pass decodes only those. Same value and
 /// gradient as decoding every point, at a fraction of the backward cost. None when no point
 /// overlaps (the loss is exactly 0).
 pub fn overlap_energy(
     field: &dyn SdfField,
     parts: &PartTensors,
-    idx: Tensor<1, Int>,
+    idx: &[usize],
     u: Tensor<2>,
     w: Tensor<1>,
 ) -> Option<Tensor<1>> {
     let nq = u.dims()[0] / 2;
-    let detached = parts.detached();
-    let d = part_sdf(field, &detached, idx.clone(), u.clone().detach())
-        .into_data()
-        .try_to_vec::<f32>()
-        .ok()?;
+    let u_host = u.clone().detach().into_data().try_to_vec::<f32>().ok()?;
+    let u_host: Vec<[f32; 3]> = u_host.chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+    let d = part_sdf_values(field, &parts.values()?, idx, &u_host);
     // NaN sums are kept: the differentiable pass must see them (divergence checks).
     let keep: Vec<i64> = (0..nq)
         .filter(|&a| {
@@ -192,6 +261,10 @@ pub fn overlap_energy(
         .collect();
     let rows = Tensor::<1, Int>::from_data(TensorData::new(rows, [2 * m]), &device);
     let keep = Tensor::<1, Int>::from_data(TensorData::new(keep, [m]), &device);
+    let idx = Tensor::<1, Int>::from_data(
+        TensorData::new(idx.iter().map(|&i| i as i64).collect::<Vec<i64>>(), [2 * nq]),
+        &device,
+    );
     let d = part_sdf(field, parts, idx.select(0, rows.clone()), u.select(0, rows));
     let psi = super::grid::psi(d.clone().narrow(0, 0, m), d.narrow(0, m, m));
     Some((psi * w.select(0, keep)).sum())

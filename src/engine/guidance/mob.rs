@@ -256,14 +256,14 @@ pub fn sweep(
         r.select(0, per_point.clone()),
         q.clone() - tr.select(0, per_point.clone()),
     ) - delta.select(0, per_point);
-    let qi: Vec<i64> = item_of.iter().map(|&k| items[k].i as i64).collect();
-    let qj: Vec<i64> = item_of.iter().map(|&k| items[k].j as i64).collect();
-    let idx = ints([qi, qj].concat(), &device);
+    let qi: Vec<usize> = item_of.iter().map(|&k| items[k].i).collect();
+    let qj: Vec<usize> = item_of.iter().map(|&k| items[k].j).collect();
+    let idx = [qi, qj].concat();
     let w = weights.select(0, act) * vel;
     overlap_energy(
         field,
         parts,
-        idx,
+        &idx,
         Tensor::cat(vec![q, xj], 0),
         w.select(0, owner),
     )

@@ -19,7 +19,7 @@
 
 use burn::tensor::{IndexingUpdateOp, Int, Tensor, TensorData};
 
-use super::field::{PartTensors, SdfField, part_sdf};
+use super::field::{PartTensors, SdfField, part_sdf, part_sdf_values};
 use super::grid::ints;
 
 /// ε in the assignment temperature.
@@ -30,19 +30,20 @@ pub const EXIST_EPS: f32 = 1e-6;
 pub const PRUNE_LOGIT: f32 = 40.0;
 
 /// Local coordinates of every point in every part's frame, [K·M, 3] (part-major), with the
-/// part index of each row.
-fn all_pairs(parts: &PartTensors, points: &[[f32; 3]]) -> (Tensor<2>, Tensor<1, Int>) {
+/// part index of each row (host).
+fn all_pairs(parts: &PartTensors, points: &[[f32; 3]]) -> (Tensor<2>, Vec<usize>) {
     let device = parts.boxes.device();
     let k = parts.boxes.dims()[0];
     let m = points.len();
     let flat: Vec<f32> = points.iter().flatten().copied().collect();
     let p = Tensor::<2>::from_data(TensorData::new(flat, [m, 3]), &device);
-    let idx: Vec<i64> = (0..k as i64)
-        .flat_map(|i| std::iter::repeat_n(i, m))
-        .collect();
-    let idx = ints(idx, &device);
-    let u = p.repeat_dim(0, k) - parts.centres.clone().select(0, idx.clone());
+    let idx: Vec<usize> = (0..k).flat_map(|i| std::iter::repeat_n(i, m)).collect();
+    let u = p.repeat_dim(0, k) - parts.centres.clone().select(0, int_tensor(&idx, &device));
     (u, idx)
+}
+
+fn int_tensor(idx: &[usize], device: &burn::tensor::Device) -> Tensor<1, Int> {
+    ints(idx.iter().map(|&i| i as i64).collect(), device)
 }
 
 /// ℓ_pc decoding every (part, point) pair with gradient: the reference for [`loss`].
@@ -56,7 +57,7 @@ pub fn loss_dense(
     let k = parts.boxes.dims()[0];
     let m = points.len();
     let (u, idx) = all_pairs(parts, points);
-    let d2 = part_sdf(field, parts, idx, u)
+    let d2 = part_sdf(field, parts, int_tensor(&idx, &u.device()), u)
         .reshape([k, m])
         .powi_scalar(2);
     let o = exist.clamp(0.0, 1.0).reshape([k, 1]) + EXIST_EPS;
@@ -81,9 +82,13 @@ pub fn loss(
     let m = points.len();
     let (u, idx) = all_pairs(parts, points);
     // Pass 1, no gradient: every d_ij and the logits on the host.
-    let detached = parts.detached();
     let host = |t: Tensor<1>| t.into_data().try_to_vec::<f32>().unwrap_or_default();
-    let d = host(part_sdf(field, &detached, idx.clone(), u.clone().detach()));
+    let host2 = |t: Tensor<2>| t.detach().into_data().try_to_vec::<f32>().unwrap_or_default();
+    let u_host: Vec<[f32; 3]> = host2(u.clone()).chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+    let d = parts
+        .values()
+        .map(|values| part_sdf_values(field, &values, &idx, &u_host))
+        .unwrap_or_default();
     let o: Vec<f32> = host(exist.clone().detach().clamp(0.0, 1.0))
         .into_iter()
         .map(|o| o + EXIST_EPS)
@@ -113,7 +118,7 @@ pub fn loss(
     let n = rows.len();
     let rows = ints(rows, &device);
     let owner = ints(owners.iter().map(|&j| j as i64).collect(), &device);
-    let pidx = idx.select(0, rows.clone());
+    let pidx = int_tensor(&idx, &device).select(0, rows.clone());
     let d2 = part_sdf(field, parts, pidx.clone(), u.select(0, rows)).powi_scalar(2);
     let o = (exist.clamp(0.0, 1.0) + EXIST_EPS).select(0, pidx);
     let logits = -(d2.clone() * tau) / o;

@@ -72,19 +72,20 @@ pub fn loss(
     let ext = (hi - lo.clone()).clamp_min(0.0);
     let (q, vel) = grid.points(lo, ext, &device);
     let owner = grid.owner_tensor(&device);
-    let qi: Vec<i64> = grid
+    let qi: Vec<usize> = grid
         .owner
         .iter()
-        .map(|&a| pairs[a as usize].0 as i64)
+        .map(|&a| pairs[a as usize].0)
         .collect();
-    let qj: Vec<i64> = grid
+    let qj: Vec<usize> = grid
         .owner
         .iter()
-        .map(|&a| pairs[a as usize].1 as i64)
+        .map(|&a| pairs[a as usize].1)
         .collect();
-    let idx = ints([qi, qj].concat(), &device);
-    let u = q.repeat_dim(0, 2) - parts.centres.clone().select(0, idx.clone());
+    let idx = [qi, qj].concat();
+    let idx_t = ints(idx.iter().map(|&i| i as i64).collect(), &device);
+    let u = q.repeat_dim(0, 2) - parts.centres.clone().select(0, idx_t);
     let o = exist.clamp(0.0, 1.0);
     let weight = o.clone().select(0, pi) * o.select(0, pj) * vel * 2.0;
-    overlap_energy(field, parts, idx, u, weight.select(0, owner))
+    overlap_energy(field, parts, &idx, u, weight.select(0, owner))
 }

@@ -508,7 +508,8 @@ fn overlap_energy_equals_the_sum_over_every_point_in_value_and_gradient() {
         let parts = PartTensors::new(boxes.clone(), centres.clone(), codes.clone());
         let u = t2(&data[3], 3) + centres.clone().select(0, idx.clone());
         let l = if pruned {
-            overlap_energy(&field, &parts, idx, u, w).expect("some points overlap")
+            let idx: Vec<usize> = idx_data.iter().map(|&i| i as usize).collect();
+            overlap_energy(&field, &parts, &idx, u, w).expect("some points overlap")
         } else {
             let d = part_sdf(&field, &parts, idx, u);
             (super::grid::psi(d.clone().narrow(0, 0, nq), d.narrow(0, nq, nq)) * w).sum()

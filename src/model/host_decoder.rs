@@ -317,7 +317,10 @@ mod tests {
             let want: Vec<f32> = dec
                 .sdf(
                     Tensor::<3>::from_data(TensorData::new(flat, [p, n, 3]), &device),
-                    Tensor::<2>::from_data(TensorData::new(codes.clone(), [p, cfg.latent]), &device),
+                    Tensor::<2>::from_data(
+                        TensorData::new(codes.clone(), [p, cfg.latent]),
+                        &device,
+                    ),
                 )
                 .into_data()
                 .try_to_vec::<f32>()

@@ -261,10 +261,7 @@ pub fn overlap_energy(
         .collect();
     let rows = Tensor::<1, Int>::from_data(TensorData::new(rows, [2 * m]), &device);
     let keep = Tensor::<1, Int>::from_data(TensorData::new(keep, [m]), &device);
-    let idx = Tensor::<1, Int>::from_data(
-        TensorData::new(idx.iter().map(|&i| i as i64).collect::<Vec<i64>>(), [2 * nq]),
-        &device,
-    );
+    let idx = super::grid::ints(idx.iter().map(|&i| i as i64).collect(), &device);
     let d = part_sdf(field, parts, idx.select(0, rows.clone()), u.select(0, rows));
     let psi = super::grid::psi(d.clone().narrow(0, 0, m), d.narrow(0, m, m));
     Some((psi * w.select(0, keep)).sum())

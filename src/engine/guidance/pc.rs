@@ -83,8 +83,16 @@ pub fn loss(
     let (u, idx) = all_pairs(parts, points);
     // Pass 1, no gradient: every d_ij and the logits on the host.
     let host = |t: Tensor<1>| t.into_data().try_to_vec::<f32>().unwrap_or_default();
-    let host2 = |t: Tensor<2>| t.detach().into_data().try_to_vec::<f32>().unwrap_or_default();
-    let u_host: Vec<[f32; 3]> = host2(u.clone()).chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+    let host2 = |t: Tensor<2>| {
+        t.detach()
+            .into_data()
+            .try_to_vec::<f32>()
+            .unwrap_or_default()
+    };
+    let u_host: Vec<[f32; 3]> = host2(u.clone())
+        .chunks(3)
+        .map(|c| [c[0], c[1], c[2]])
+        .collect();
     let d = parts
         .values()
         .map(|values| part_sdf_values(field, &values, &idx, &u_host))

@@ -72,16 +72,8 @@ pub fn loss(
     let ext = (hi - lo.clone()).clamp_min(0.0);
     let (q, vel) = grid.points(lo, ext, &device);
     let owner = grid.owner_tensor(&device);
-    let qi: Vec<usize> = grid
-        .owner
-        .iter()
-        .map(|&a| pairs[a as usize].0)
-        .collect();
-    let qj: Vec<usize> = grid
-        .owner
-        .iter()
-        .map(|&a| pairs[a as usize].1)
-        .collect();
+    let qi: Vec<usize> = grid.owner.iter().map(|&a| pairs[a as usize].0).collect();
+    let qj: Vec<usize> = grid.owner.iter().map(|&a| pairs[a as usize].1).collect();
     let idx = [qi, qj].concat();
     let idx_t = ints(idx.iter().map(|&i| i as i64).collect(), &device);
     let u = q.repeat_dim(0, 2) - parts.centres.clone().select(0, idx_t);

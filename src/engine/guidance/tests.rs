@@ -572,3 +572,73 @@ fn pruned_point_cloud_loss_equals_the_dense_one_in_value_and_gradient() {
         }
     }
 }
+
+/// The value-only part SDF (what every first pass selects points with) equals the
+/// differentiable one, for the analytic field (default `sdf_values`) and for the learned decoder
+/// behind `LatentSdfDecoder` (the `HostDecoder` path), inside and outside the boxes.
+#[test]
+fn value_only_part_sdf_equals_the_differentiable_one() {
+    use super::field::{part_sdf, part_sdf_values};
+    use crate::model::shape_prior::LatentSdfDecoder;
+    let cfg = ShapePriorConfig {
+        latent: LATENT,
+        decoder_hidden: 32,
+        decoder_blocks: 2,
+        encoder_hidden: 8,
+        encoder_blocks: 1,
+        pe_freqs: 4,
+    };
+    let mut rng = Rng::new(21);
+    let learned = LatentSdfDecoder::new(&crate::model::shape_prior::tests::randomised(
+        ShapeDecoder::new(&cfg, &mut rng, &cpu()),
+        5,
+    ));
+    let boxed = BoxField { latent: LATENT };
+    let dev = cpu_autodiff();
+    let (k, q) = (4, 500);
+    let mut draw = |n: usize, lo: f64, hi: f64| -> Vec<f32> {
+        (0..n).map(|_| rng.range(lo, hi) as f32).collect()
+    };
+    let t2 = |v: Vec<f32>, c: usize| {
+        Tensor::<2>::from_data(TensorData::new(v.clone(), [v.len() / c, c]), &dev)
+    };
+    let parts = PartTensors::new(
+        t2(draw(k * 3, 0.05, 0.4), 3),
+        t2(draw(k * 3, -0.3, 0.3), 3),
+        t2(draw(k * LATENT, -0.6, 0.6), LATENT),
+    );
+    let u = draw(q * 3, -0.7, 0.7);
+    let idx: Vec<usize> = (0..q).map(|a| a % k).collect();
+    let values = parts.values().expect("f32 tensors");
+    for field in [&learned as &dyn SdfField, &boxed] {
+        let want: Vec<f32> = part_sdf(
+            field,
+            &parts,
+            grid::ints(idx.iter().map(|&i| i as i64).collect(), &dev),
+            t2(u.clone(), 3),
+        )
+        .into_data()
+        .try_to_vec()
+        .unwrap();
+        let pts: Vec<[f32; 3]> = u.chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+        let got = part_sdf_values(field, &values, &idx, &pts);
+        assert_eq!(got.len(), q);
+        let (inside, outside) =
+            want.iter().fold(
+                (0, 0),
+                |(i, o), &d| {
+                    if d < 0.0 { (i + 1, o) } else { (i, o + 1) }
+                },
+            );
+        assert!(
+            inside > 0 && outside > 0,
+            "{inside} inside, {outside} outside"
+        );
+        for (a, (g, w)) in got.iter().zip(&want).enumerate() {
+            assert!(
+                (g - w).abs() <= 1e-5 * w.abs().max(1.0),
+                "point {a}: {g} vs {w}"
+            );
+        }
+    }
+}

@@ -44,11 +44,7 @@ pub trait SdfField {
             TensorData::new(codes.to_vec(), [codes.len() / f, f]),
             &device,
         );
-        let idx = Tensor::<1, Int>::from_data(
-            TensorData::new(idx.iter().map(|&i| i as i64).collect::<Vec<i64>>(), [n]),
-            &device,
-        );
-        self.sdf(q, codes, idx)
+        self.sdf(q, codes, super::grid::index_tensor(idx, &device))
             .into_data()
             .try_to_vec::<f32>()
             .unwrap_or_else(|_| vec![f32::NAN; n])
@@ -191,6 +187,12 @@ pub fn part_sdf(
     outside + kappa.reshape([n]) * f
 }
 
+/// Host copy of points [Q, 3] (cut from the autodiff graph), or None if not f32.
+pub fn host_points(u: &Tensor<2>) -> Option<Vec<[f32; 3]>> {
+    let v = u.clone().detach().into_data().try_to_vec::<f32>().ok()?;
+    Some(v.chunks(3).map(|c| [c[0], c[1], c[2]]).collect())
+}
+
 /// [`part_sdf`] without gradient on host values: d(u_q, idx[q]) for local points `u` [Q] (in
 /// part `idx[q]`'s frame) → [Q], in one [`SdfField::sdf_values`] call.
 pub fn part_sdf_values(
@@ -237,9 +239,7 @@ pub fn overlap_energy(
     w: Tensor<1>,
 ) -> Option<Tensor<1>> {
     let nq = u.dims()[0] / 2;
-    let u_host = u.clone().detach().into_data().try_to_vec::<f32>().ok()?;
-    let u_host: Vec<[f32; 3]> = u_host.chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
-    let d = part_sdf_values(field, &parts.values()?, idx, &u_host);
+    let d = part_sdf_values(field, &parts.values()?, idx, &host_points(&u)?);
     // NaN sums are kept: the differentiable pass must see them (divergence checks).
     let keep: Vec<i64> = (0..nq)
         .filter(|&a| {
@@ -261,7 +261,7 @@ pub fn overlap_energy(
         .collect();
     let rows = Tensor::<1, Int>::from_data(TensorData::new(rows, [2 * m]), &device);
     let keep = Tensor::<1, Int>::from_data(TensorData::new(keep, [m]), &device);
-    let idx = super::grid::ints(idx.iter().map(|&i| i as i64).collect(), &device);
+    let idx = super::grid::index_tensor(idx, &device);
     let d = part_sdf(field, parts, idx.select(0, rows.clone()), u.select(0, rows));
     let psi = super::grid::psi(d.clone().narrow(0, 0, m), d.narrow(0, m, m));
     Some((psi * w.select(0, keep)).sum())

@@ -103,6 +103,11 @@ pub fn ints(v: Vec<i64>, device: &Device) -> Tensor<1, Int> {
     Tensor::<1, Int>::from_data(TensorData::new(v, [n]), device)
 }
 
+/// An Int tensor from host part indices.
+pub fn index_tensor(idx: &[usize], device: &Device) -> Tensor<1, Int> {
+    ints(idx.iter().map(|&i| i as i64).collect(), device)
+}
+
 /// ψ = ½ · max(0, −(dᵢ + dⱼ))² per point.
 pub fn psi(di: Tensor<1>, dj: Tensor<1>) -> Tensor<1> {
     (-(di + dj)).clamp_min(0.0).powi_scalar(2) * 0.5

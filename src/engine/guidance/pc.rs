@@ -17,10 +17,10 @@
 //! a relative ≲ K·e^−40·τ/ε — below f32 resolution ([`loss_dense`] is the reference, compared in
 //! the tests).
 
-use burn::tensor::{IndexingUpdateOp, Int, Tensor, TensorData};
+use burn::tensor::{IndexingUpdateOp, Tensor, TensorData};
 
-use super::field::{PartTensors, SdfField, part_sdf, part_sdf_values};
-use super::grid::ints;
+use super::field::{PartTensors, SdfField, host_points, part_sdf, part_sdf_values};
+use super::grid::{index_tensor, ints};
 
 /// ε in the assignment temperature.
 pub const EXIST_EPS: f32 = 1e-6;
@@ -38,12 +38,8 @@ fn all_pairs(parts: &PartTensors, points: &[[f32; 3]]) -> (Tensor<2>, Vec<usize>
     let flat: Vec<f32> = points.iter().flatten().copied().collect();
     let p = Tensor::<2>::from_data(TensorData::new(flat, [m, 3]), &device);
     let idx: Vec<usize> = (0..k).flat_map(|i| std::iter::repeat_n(i, m)).collect();
-    let u = p.repeat_dim(0, k) - parts.centres.clone().select(0, int_tensor(&idx, &device));
+    let u = p.repeat_dim(0, k) - parts.centres.clone().select(0, index_tensor(&idx, &device));
     (u, idx)
-}
-
-fn int_tensor(idx: &[usize], device: &burn::tensor::Device) -> Tensor<1, Int> {
-    ints(idx.iter().map(|&i| i as i64).collect(), device)
 }
 
 /// ℓ_pc decoding every (part, point) pair with gradient: the reference for [`loss`].
@@ -57,7 +53,7 @@ pub fn loss_dense(
     let k = parts.boxes.dims()[0];
     let m = points.len();
     let (u, idx) = all_pairs(parts, points);
-    let d2 = part_sdf(field, parts, int_tensor(&idx, &u.device()), u)
+    let d2 = part_sdf(field, parts, index_tensor(&idx, &u.device()), u)
         .reshape([k, m])
         .powi_scalar(2);
     let o = exist.clamp(0.0, 1.0).reshape([k, 1]) + EXIST_EPS;
@@ -83,19 +79,10 @@ pub fn loss(
     let (u, idx) = all_pairs(parts, points);
     // Pass 1, no gradient: every d_ij and the logits on the host.
     let host = |t: Tensor<1>| t.into_data().try_to_vec::<f32>().unwrap_or_default();
-    let host2 = |t: Tensor<2>| {
-        t.detach()
-            .into_data()
-            .try_to_vec::<f32>()
-            .unwrap_or_default()
-    };
-    let u_host: Vec<[f32; 3]> = host2(u.clone())
-        .chunks(3)
-        .map(|c| [c[0], c[1], c[2]])
-        .collect();
     let d = parts
         .values()
-        .map(|values| part_sdf_values(field, &values, &idx, &u_host))
+        .zip(host_points(&u))
+        .map(|(values, u)| part_sdf_values(field, &values, &idx, &u))
         .unwrap_or_default();
     let o: Vec<f32> = host(exist.clone().detach().clamp(0.0, 1.0))
         .into_iter()
@@ -126,7 +113,7 @@ pub fn loss(
     let n = rows.len();
     let rows = ints(rows, &device);
     let owner = ints(owners.iter().map(|&j| j as i64).collect(), &device);
-    let pidx = int_tensor(&idx, &device).select(0, rows.clone());
+    let pidx = index_tensor(&idx, &device).select(0, rows.clone());
     let d2 = part_sdf(field, parts, pidx.clone(), u.select(0, rows)).powi_scalar(2);
     let o = (exist.clamp(0.0, 1.0) + EXIST_EPS).select(0, pidx);
     let logits = -(d2.clone() * tau) / o;

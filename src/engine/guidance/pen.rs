@@ -16,7 +16,7 @@ use burn::tensor::Tensor;
 
 use super::HostParts;
 use super::field::{PartTensors, SdfField, overlap_energy};
-use super::grid::{GridBatch, axis_counts, ints};
+use super::grid::{GridBatch, axis_counts, index_tensor, ints};
 use crate::graph::EDGE_PAIRS;
 
 /// Pairs whose existence product is below this are skipped.
@@ -75,8 +75,7 @@ pub fn loss(
     let qi: Vec<usize> = grid.owner.iter().map(|&a| pairs[a as usize].0).collect();
     let qj: Vec<usize> = grid.owner.iter().map(|&a| pairs[a as usize].1).collect();
     let idx = [qi, qj].concat();
-    let idx_t = ints(idx.iter().map(|&i| i as i64).collect(), &device);
-    let u = q.repeat_dim(0, 2) - parts.centres.clone().select(0, idx_t);
+    let u = q.repeat_dim(0, 2) - parts.centres.clone().select(0, index_tensor(&idx, &device));
     let o = exist.clamp(0.0, 1.0);
     let weight = o.clone().select(0, pi) * o.select(0, pj) * vel * 2.0;
     overlap_energy(field, parts, &idx, u, weight.select(0, owner))

@@ -614,7 +614,7 @@ fn value_only_part_sdf_equals_the_differentiable_one() {
         let want: Vec<f32> = part_sdf(
             field,
             &parts,
-            grid::ints(idx.iter().map(|&i| i as i64).collect(), &dev),
+            grid::index_tensor(&idx, &dev),
             t2(u.clone(), 3),
         )
         .into_data()

@@ -70,6 +70,10 @@ pub struct SubmitArgs {
     /// 0.05, 0 = off).
     #[arg(long, env = "PHYSNAP_GUIDANCE_MAX_STEP")]
     guidance_max_step: Option<f64>,
+    /// Refinement steps on the guidance loss of the finished sample (physnap, not in the
+    /// paper; server default 10, 0 = off).
+    #[arg(long, env = "PHYSNAP_GUIDANCE_REFINE_STEPS")]
+    guidance_refine_steps: Option<u32>,
     /// Reverse-step rule: ddim (server default) or ddpm (the paper's, with --steps 1000).
     #[arg(long, env = "PHYSNAP_SAMPLER", value_parser = ["ddpm", "ddim"])]
     sampler: Option<String>,
@@ -160,6 +164,7 @@ pub fn submit(a: SubmitArgs) -> anyhow::Result<()> {
             n_g: a.n_g,
             tau: a.tau,
             guidance_max_step: a.guidance_max_step,
+            refine_steps: a.guidance_refine_steps,
             sampler: a.sampler.clone().unwrap_or_default(),
             eta: a.eta,
             steps: a.steps,

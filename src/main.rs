@@ -86,7 +86,7 @@ enum EvalCommand {
     Generative(EvalGenerativeArgs),
     /// Guidance metrics (E_pc, D_pc, E_pen, E_mob medians) per variant on test scans, in the
     /// paper's Table 1 layout; writes guided_table.md and guided_table.json.
-    Guided(EvalGuidedArgs),
+    Guided(Box<EvalGuidedArgs>),
 }
 
 #[derive(Args, Debug)]
@@ -296,6 +296,10 @@ struct SamplingArgs {
     /// raw gradient, which diverges with the shipped weights. 0: off (the paper's raw step).
     #[arg(long, env = "PHYSNAP_GUIDANCE_MAX_STEP", default_value_t = physnap::engine::guidance::DEFAULT_MAX_STEP)]
     guidance_max_step: f64,
+    /// Refinement: small clamped gradient steps (a tenth of --guidance-max-step) on the guidance
+    /// loss of the finished sample (physnap, not in the paper; 0: off).
+    #[arg(long, env = "PHYSNAP_GUIDANCE_REFINE_STEPS", default_value_t = physnap::engine::guidance::DEFAULT_REFINE_STEPS)]
+    guidance_refine_steps: usize,
     /// Reverse-step rule: ddim (default) or ddpm (NAP; strided ancestral with --steps < 1000).
     /// The paper's sampler is `--sampler ddpm --steps 0`.
     #[arg(long, env = "PHYSNAP_SAMPLER", default_value = "ddim", value_parser = ["ddpm", "ddim"])]
@@ -632,7 +636,7 @@ fn run(command: Command) -> anyhow::Result<()> {
         },
         Command::Eval { command } => match command {
             EvalCommand::Generative(a) => eval_cmd::generative(a),
-            EvalCommand::Guided(a) => model_cmd::eval_guided(a),
+            EvalCommand::Guided(a) => model_cmd::eval_guided(*a),
         },
     }
 }

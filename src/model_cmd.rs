@@ -382,6 +382,7 @@ fn guidance_options(a: &GenerateArgs) -> anyhow::Result<Option<GuidanceOptions>>
         steps: a.sampling.guidance_steps,
         tau: a.sampling.tau,
         max_step: super::max_step(a.sampling.guidance_max_step),
+        refine_steps: a.sampling.guidance_refine_steps,
         ..paper
     };
     opts.validate(Schedule::default().len())?;
@@ -551,6 +552,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         guided_steps: a.sampling.guidance_steps,
         tau: a.sampling.tau,
         max_step: super::max_step(a.sampling.guidance_max_step),
+        refine_steps: a.sampling.guidance_refine_steps,
         sampler: match a.sampling.sampler.as_str() {
             "ddim" => Sampler::Ddim {
                 eta: a.sampling.eta,
@@ -636,13 +638,20 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
             serde_json::Value::Null
         }
     };
+    let sample_json = |s: &physnap::eval::guided::SampleRecord| {
+        let m = |i: usize| s.metrics.map(|m| num(m[i]));
+        serde_json::json!({
+            "cloud": s.cloud, "seed": s.seed, "seconds": s.seconds, "diverged": s.metrics.is_none(),
+            "e_pc": m(0), "d_pc": m(1), "e_pen": m(2), "e_mob": m(3),
+        })
+    };
     let json = serde_json::json!({
         "format": "physnap.guided_table/v1",
         "clouds": clouds.iter().map(|c| c.id.clone()).collect::<Vec<_>>(),
         "samples_per_cloud": a.samples_per_cloud,
         "command": std::env::args().collect::<Vec<_>>().join(" "),
         "seed": a.seed, "guidance_steps": a.sampling.guidance_steps, "tau": a.sampling.tau,
-        "guidance_max_step": opts.max_step,
+        "guidance_max_step": opts.max_step, "guidance_refine_steps": opts.refine_steps,
         "sampler": a.sampling.sampler, "steps": a.sampling.steps, "eta": a.sampling.eta,
         "category_guidance": a.sampling.category.category_guidance,
         "statistic": "E_* and D_pc: median over all samples; MMD and 1-NNA: per cloud (its samples vs its references), median over clouds",
@@ -661,6 +670,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
             "pen_share": num(r.pen_share), "mob_share": num(r.mob_share),
             "mmd": num(r.mmd), "one_nna": num(r.one_nna),
             "samples": r.samples, "diverged": r.diverged, "seconds_per_sample": r.seconds_per_sample,
+            "per_sample": r.per_sample.iter().map(sample_json).collect::<Vec<_>>(),
         })).collect::<Vec<_>>(),
     });
     std::fs::write(

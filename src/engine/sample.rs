@@ -278,7 +278,7 @@ pub fn sample_guided(
     });
     let times = timesteps(schedule.len(), req.steps);
     let full = times.len() == schedule.len();
-    let total = times.len();
+    let total = times.len() + guidance.map_or(0, |(g, _)| g.refine_steps);
     for (k, &t) in times.iter().enumerate() {
         let t_prev = times.get(k + 1).copied();
         let (s, n) = schedule.noise_coefficients(t);
@@ -293,49 +293,14 @@ pub fn sample_guided(
             let x0v = (va.clone() - ev.clone() * n) / s * sv.autodiff();
             let x0e = (ea.clone() - ee.clone() * n) / s * se.autodiff();
             let mut mob_rng = Rng::fork(req.seed ^ 0x4755_4944_414e_4345, k as u64);
-            let (loss, mut values) = guidance_loss(ctx.field, g, x0v, x0e, &mut mob_rng);
-            if !values.total.is_finite() {
-                return Err(EngineError::Diverged {
-                    step: k + 1,
-                    t,
-                    what: "guidance loss",
-                });
-            }
-            let grad = loss.map(|loss| {
-                let grads = loss.backward();
-                let gv = va.grad(&grads).map(|g| g.inner());
-                let ge = ea.grad(&grads).map(|g| g.inner());
-                (gv, ge)
-            });
-            let mut gmax = 0.0f32;
-            if let Some((gv, ge)) = &grad {
-                for x in [gv, ge].into_iter().flatten() {
-                    let m: f32 = x.clone().abs().max().into_scalar::<f32>();
-                    gmax = if m.is_nan() { f32::NAN } else { gmax.max(m) };
-                }
-            }
-            tracing::debug!(
-                step = k + 1,
-                t,
-                pc = values.pc,
-                pen = values.pen,
-                mob = values.mob,
-                grad_max = gmax,
-                "guided step"
-            );
-            let limit = if g.max_step.is_some() {
-                f32::INFINITY
-            } else {
-                DIVERGENCE_LIMIT
-            };
-            if !(gmax.is_finite() && gmax <= limit) {
-                return Err(EngineError::Diverged {
-                    step: k + 1,
-                    t,
-                    what: "guidance gradient",
-                });
-            }
-            values.grad_max = gmax as f64;
+            let (grad, values) = guidance_gradient(
+                ctx.field,
+                g,
+                (&va, &ea),
+                (x0v, x0e),
+                &mut mob_rng,
+                (k + 1, t),
+            )?;
             losses = Some(values);
             (ev.inner(), ee.inner(), grad)
         } else {
@@ -369,20 +334,11 @@ pub fn sample_guided(
             v = v + zv * c.sigma;
             e = e + ze * c.sigma;
         }
-        if let Some((gv, ge)) = grad {
-            let clip = |g: Tensor<3>| match guided.and_then(|(o, _)| o.max_step) {
-                Some(c) => g.clamp(-c as f32, c as f32),
-                None => g,
-            };
-            if let Some(gv) = gv {
-                v = v - clip(gv);
-            }
-            if let Some(ge) = ge {
-                e = e - clip(ge);
-            }
+        if let (Some((g, _)), Some(grad)) = (guided, grad) {
+            (v, e) = descend((v, e), grad, g.max_step);
         }
         // A cheap divergence check every 50 steps, every guided step and at the end.
-        if k % 50 == 49 || k + 1 == total || guided.is_some() {
+        if k % 50 == 49 || k + 1 == times.len() || guided.is_some() {
             check_state(&v, "nodes", k + 1, t)?;
             check_state(&e, "edges", k + 1, t)?;
         }
@@ -400,7 +356,130 @@ pub fn sample_guided(
             });
         }
     }
+    // Refinement (physnap, not in the paper): small clamped gradient steps on ℓ of the sample
+    // itself, x₀ ← x₀ − clamp(∇_{x₀} ℓ(x₀)); no denoiser, no noise.
+    if let Some((g, ctx)) = guidance.filter(|(g, _)| g.refine_steps > 0) {
+        let (sv, se) = scale_tensors.expect("scales with guidance");
+        for r in 0..g.refine_steps {
+            let step = times.len() + r + 1;
+            let va = v.clone().autodiff().require_grad();
+            let ea = e.clone().autodiff().require_grad();
+            let x0v = va.clone() * sv.clone().autodiff();
+            let x0e = ea.clone() * se.clone().autodiff();
+            let mut mob_rng = Rng::fork(req.seed ^ 0x4755_4944_414e_4345, (step - 1) as u64);
+            let (grad, values) = guidance_gradient(
+                ctx.field,
+                g,
+                (&va, &ea),
+                (x0v, x0e),
+                &mut mob_rng,
+                (step, 0),
+            )?;
+            if let Some(grad) = grad {
+                (v, e) = descend((v, e), grad, g.refine_max_step());
+            }
+            check_state(&v, "nodes", step, 0)?;
+            check_state(&e, "edges", step, 0)?;
+            let x0_preview = (req.preview_every > 0
+                && (step.is_multiple_of(req.preview_every) || step == total))
+                .then(|| from_tensors(v.clone(), e.clone()));
+            if let ControlFlow::Break(reason) = on_step(&StepEvent {
+                step,
+                total,
+                t: 0,
+                x0_preview,
+                guidance: Some(values),
+            }) {
+                return Err(EngineError::Stopped {
+                    step,
+                    total,
+                    reason,
+                });
+            }
+        }
+    }
     Ok(from_tensors(v, e))
+}
+
+/// Per-entry gradients of ℓ with respect to the (autodiff) nodes and edges.
+type Gradient = (Option<Tensor<3>>, Option<Tensor<3>>);
+
+/// ℓ(x̂₀) and its gradient with respect to `wrt`, where `x0` = (nodes, edges) of x̂₀ in raw units
+/// was computed from `wrt` on the autodiff device. Fails as diverged on a non-finite loss, or on
+/// a non-finite gradient (or, without a clamp, one beyond [`DIVERGENCE_LIMIT`]).
+fn guidance_gradient(
+    field: &dyn SdfField,
+    g: &GuidanceOptions,
+    wrt: (&Tensor<3>, &Tensor<3>),
+    x0: (Tensor<3>, Tensor<3>),
+    mob_rng: &mut Rng,
+    (step, t): (usize, usize),
+) -> Result<(Option<Gradient>, GuidanceLosses), EngineError> {
+    let (loss, mut values) = guidance_loss(field, g, x0.0, x0.1, mob_rng);
+    if !values.total.is_finite() {
+        return Err(EngineError::Diverged {
+            step,
+            t,
+            what: "guidance loss",
+        });
+    }
+    let grad = loss.map(|loss| {
+        let grads = loss.backward();
+        let gv = wrt.0.grad(&grads).map(|g| g.inner());
+        let ge = wrt.1.grad(&grads).map(|g| g.inner());
+        (gv, ge)
+    });
+    let mut gmax = 0.0f32;
+    if let Some((gv, ge)) = &grad {
+        for x in [gv, ge].into_iter().flatten() {
+            let m: f32 = x.clone().abs().max().into_scalar::<f32>();
+            gmax = if m.is_nan() { f32::NAN } else { gmax.max(m) };
+        }
+    }
+    tracing::debug!(
+        step,
+        t,
+        pc = values.pc,
+        pen = values.pen,
+        mob = values.mob,
+        grad_max = gmax,
+        "guided step"
+    );
+    let limit = if g.max_step.is_some() {
+        f32::INFINITY
+    } else {
+        DIVERGENCE_LIMIT
+    };
+    if !(gmax.is_finite() && gmax <= limit) {
+        return Err(EngineError::Diverged {
+            step,
+            t,
+            what: "guidance gradient",
+        });
+    }
+    values.grad_max = gmax as f64;
+    Ok((grad, values))
+}
+
+/// x ← x − clamp(∇ℓ, ±max_step) (no clamp when `max_step` is None).
+fn descend(
+    (v, e): (Tensor<3>, Tensor<3>),
+    (gv, ge): Gradient,
+    max_step: Option<f64>,
+) -> (Tensor<3>, Tensor<3>) {
+    let clip = |g: Tensor<3>| match max_step {
+        Some(c) => g.clamp(-c as f32, c as f32),
+        None => g,
+    };
+    let v = match gv {
+        Some(g) => v - clip(g),
+        None => v,
+    };
+    let e = match ge {
+        Some(g) => e - clip(g),
+        None => e,
+    };
+    (v, e)
 }
 
 #[cfg(test)]
@@ -679,6 +758,72 @@ mod tests {
         })
         .unwrap_err();
         assert!(e.to_string().contains("guidance"), "{e}");
+    }
+
+    #[test]
+    fn refinement_descends_the_guidance_loss_after_the_last_step() {
+        let model = tiny();
+        let field = tiny_field();
+        let mut scales = FeatureScales::default();
+        for c in 1..7 {
+            scales.node[c] = 0.2;
+        }
+        let ctx = GuidanceContext {
+            field: &field,
+            scales: &scales,
+        };
+        let points = cloud();
+        let schedule = Schedule::linear(40, 1e-3, 0.02);
+        let base = GuidanceOptions {
+            steps: 20,
+            w_pc: 0.2,
+            w_pen: 0.01,
+            w_mob: 0.01,
+            ..GuidanceOptions::paper(points.clone(), super::super::guidance::Terms::ALL)
+        };
+        let run = |refine_steps: usize, events: &mut Vec<(usize, usize, usize, f64)>| {
+            let req = SampleRequest {
+                seed: 5,
+                batch: 1,
+                category: Some(0),
+                guidance: Some(GuidanceOptions {
+                    refine_steps,
+                    ..base.clone()
+                }),
+                ..Default::default()
+            };
+            let dev = crate::model::cpu();
+            sample_guided(&model, &schedule, &req, Some(ctx), &dev, &mut |s| {
+                let total = s.guidance.map_or(f64::NAN, |l| l.total);
+                events.push((s.step, s.total, s.t, total));
+                ControlFlow::Continue(())
+            })
+            .unwrap()
+        };
+        let (mut plain_ev, mut refined_ev) = (Vec::new(), Vec::new());
+        let plain = run(0, &mut plain_ev);
+        let refined = run(10, &mut refined_ev);
+        // The reverse steps are the same; ten more events follow, at t = 0, each guided.
+        assert_eq!(refined_ev.len(), 50);
+        assert!(refined_ev.iter().all(|e| e.1 == 50), "{refined_ev:?}");
+        assert_eq!(
+            refined_ev[..40]
+                .iter()
+                .map(|e| e.3.to_bits())
+                .collect::<Vec<_>>(),
+            plain_ev.iter().map(|e| e.3.to_bits()).collect::<Vec<_>>()
+        );
+        let tail = &refined_ev[40..];
+        assert!(tail.iter().all(|e| e.2 == 0 && e.3.is_finite()), "{tail:?}");
+        assert_eq!(
+            tail.iter().map(|e| e.0).collect::<Vec<_>>(),
+            (41..=50).collect::<Vec<_>>()
+        );
+        // Its first loss is the unrefined sample's; nine small steps later the loss is lower.
+        let (first, last) = (tail[0].3, tail[9].3);
+        assert!(last < first, "refinement must descend: {first} -> {last}");
+        assert_ne!(plain, refined);
+        assert_eq!(refined, run(10, &mut Vec::new()), "deterministic per seed");
     }
 
     #[test]

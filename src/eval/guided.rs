@@ -251,6 +251,8 @@ pub struct TableOptions {
     pub tau: f64,
     /// Optional clamp of the guidance gradient (a deviation; see `GuidanceOptions::max_step`).
     pub max_step: Option<f64>,
+    /// Refinement steps after sampling (see `GuidanceOptions::refine_steps`).
+    pub refine_steps: usize,
     /// Reverse-step rule and count.
     pub sampler: Sampler,
     /// Reverse steps (0: all).
@@ -306,6 +308,21 @@ pub struct TableRow {
     pub diverged: usize,
     /// Mean wall time per sample (s), sampling + meshing + metrics.
     pub seconds_per_sample: f64,
+    /// Every sample of the row, in run order (the medians hide which scan and seed overlap).
+    pub per_sample: Vec<SampleRecord>,
+}
+
+/// One sample of a [`TableRow`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct SampleRecord {
+    /// Cloud id.
+    pub cloud: String,
+    /// The sample's seed.
+    pub seed: u64,
+    /// (E_pc, D_pc, E_pen, E_mob); None when the sample diverged.
+    pub metrics: Option<[f64; 4]>,
+    /// Wall time of this sample (s), sampling + meshing + metrics.
+    pub seconds: f64,
 }
 
 /// Run the guidance table: every block × variant × cloud × sample. `on_sample` gets
@@ -569,6 +586,7 @@ pub fn run_rows(
             let mut values: [Vec<f64>; 4] = Default::default();
             let mut per_cloud: [Vec<f64>; 2] = Default::default();
             let mut diverged = 0;
+            let mut per_sample = Vec::new();
             for (c, cloud) in clouds.iter().enumerate() {
                 let refs = opts.references.get(c).map(Vec::as_slice).unwrap_or(&[]);
                 let mut generated: Vec<StateClouds> = Vec::new();
@@ -580,12 +598,15 @@ pub fn run_rows(
                     steps: s.steps,
                     tau: s.tau,
                     max_step: opts.max_step,
+                    refine_steps: opts.refine_steps,
                 });
                 for k in 0..opts.samples_per_cloud {
+                    let seed = opts
+                        .seed
+                        .wrapping_add((c * opts.samples_per_cloud + k) as u64);
+                    let sample_started = std::time::Instant::now();
                     let req = GenerateRequest {
-                        seed: opts
-                            .seed
-                            .wrapping_add((c * opts.samples_per_cloud + k) as u64),
+                        seed,
                         samples: 1,
                         category: if aware { cloud.category } else { None },
                         meshing: opts.meshing,
@@ -607,11 +628,16 @@ pub fn run_rows(
                         Ok(out) => {
                             let g = &out[0];
                             let m = metrics(decoder, &g.raw, &g.meshes, &cloud.points);
-                            for (slot, v) in
-                                values.iter_mut().zip([m.e_pc, m.d_pc, m.e_pen, m.e_mob])
-                            {
+                            let four = [m.e_pc, m.d_pc, m.e_pen, m.e_mob];
+                            for (slot, v) in values.iter_mut().zip(four) {
                                 slot.push(v);
                             }
+                            per_sample.push(SampleRecord {
+                                cloud: cloud.id.clone(),
+                                seed,
+                                metrics: Some(four),
+                                seconds: sample_started.elapsed().as_secs_f64(),
+                            });
                             // A sample without any mesh triangles has no surface to compare;
                             // it stays out of the generative metrics (it still counts above).
                             if !refs.is_empty()
@@ -620,7 +646,15 @@ pub fn run_rows(
                                 generated.push(sc);
                             }
                         }
-                        Err(EngineError::Diverged { .. }) => diverged += 1,
+                        Err(EngineError::Diverged { .. }) => {
+                            diverged += 1;
+                            per_sample.push(SampleRecord {
+                                cloud: cloud.id.clone(),
+                                seed,
+                                metrics: None,
+                                seconds: sample_started.elapsed().as_secs_f64(),
+                            });
+                        }
                         Err(e) => return Err(e),
                     }
                     done += 1;
@@ -649,6 +683,7 @@ pub fn run_rows(
                 samples: n,
                 diverged,
                 seconds_per_sample: started.elapsed().as_secs_f64() / (n + diverged).max(1) as f64,
+                per_sample,
             });
         }
     }
@@ -855,6 +890,7 @@ mod tests {
             guided_steps: 1000,
             tau: 1000.0,
             max_step: Some(0.05),
+            refine_steps: 0,
             sampler: Sampler::Ddim { eta: 0.0 },
             steps: 4,
             meshing: MeshingOptions { resolution: 8 },

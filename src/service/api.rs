@@ -61,6 +61,11 @@ pub struct JobRequest {
     /// 0 = off (the paper's raw step).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub guidance_max_step: Option<f64>,
+    /// Refinement steps after sampling (physnap, not in the paper): small clamped gradient
+    /// steps on the guidance loss of the finished sample (0-1000; default 10; 0 = off, the
+    /// paper).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub refine_steps: Option<u32>,
     /// Sampler: `ddim` (default) or `ddpm` (NAP's; strided ancestral with fewer steps). The
     /// paper's sampler is `ddpm` with 1000 steps.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -117,6 +122,8 @@ pub struct UploadParams {
     pub tau: Option<f64>,
     /// Guidance-gradient clamp.
     pub guidance_max_step: Option<f64>,
+    /// Refinement steps after sampling.
+    pub refine_steps: Option<u32>,
     /// Sampler (`ddpm` or `ddim`).
     pub sampler: Option<String>,
     /// DDIM η.
@@ -181,6 +188,7 @@ impl JobRequest {
             n_g: self.n_g,
             tau: self.tau,
             guidance_max_step: self.guidance_max_step,
+            refine_steps: self.refine_steps,
             sampler: self.sampler,
             eta: self.eta,
             steps: self.steps,
@@ -207,6 +215,7 @@ impl UploadParams {
             n_g: self.n_g,
             tau: self.tau,
             guidance_max_step: self.guidance_max_step,
+            refine_steps: self.refine_steps,
             sampler: self.sampler,
             eta: self.eta,
             steps: self.steps,
@@ -240,6 +249,8 @@ pub struct RequestView {
     pub tau: f64,
     /// Guidance-gradient clamp (absent: off, the paper's raw gradient).
     pub guidance_max_step: Option<f64>,
+    /// Refinement steps after sampling (0: off).
+    pub refine_steps: u32,
     /// Sampler.
     pub sampler: String,
     /// DDIM η (0 for `ddpm`).
@@ -466,6 +477,7 @@ pub fn request_view(s: &JobSpec) -> RequestView {
         n_g: s.n_g,
         tau: s.tau,
         guidance_max_step: s.guidance_max_step,
+        refine_steps: s.refine_steps,
         sampler: s.sampler.clone(),
         eta: s.eta,
         steps: s.steps,

@@ -139,6 +139,7 @@ pub fn input_of(spec: pb::JobSpec) -> JobInput {
         n_g: spec.n_g,
         tau: spec.tau,
         guidance_max_step: spec.guidance_max_step,
+        refine_steps: spec.refine_steps,
         sampler: Some(spec.sampler).filter(|s| !s.is_empty()),
         eta: spec.eta,
         steps: spec.steps,

@@ -206,6 +206,7 @@ pub fn guidance_of(spec: &JobSpec, schedule_steps: usize) -> Option<GuidanceOpti
         steps: spec.guidance_threshold(schedule_steps),
         tau: spec.tau,
         max_step: spec.guidance_max_step,
+        refine_steps: spec.refine_steps as usize,
     })
 }
 
@@ -235,7 +236,7 @@ fn ranking_json(spec: &JobSpec, guidance: &Option<GuidanceOptions>, rows: &[Rank
         "guidance": guidance.as_ref().map(|g| serde_json::json!({
             "w_pc": g.w_pc, "w_pen": g.w_pen, "w_mob": g.w_mob,
             "n_g": spec.n_g, "guided_below_t": g.steps, "tau": g.tau,
-            "max_step": g.max_step,
+            "max_step": g.max_step, "refine_steps": g.refine_steps,
         })),
         "sampler": spec.sampler, "eta": spec.eta, "steps": spec.steps,
         "retrieval": spec.retrieval,
@@ -284,7 +285,8 @@ pub fn run_job(
     };
     let decoder = LatentSdfDecoder::new(&m.shape_prior.decoder);
     let started = Instant::now();
-    let per_sample = timesteps(models.schedule.len(), spec.steps as usize).len();
+    let per_sample = timesteps(models.schedule.len(), spec.steps as usize).len()
+        + guidance.as_ref().map_or(0, |g| g.refine_steps);
     let total_all = spec.samples as usize * per_sample;
     let mut done_samples: Vec<Generated> = Vec::new();
     let mut diverged: Vec<(usize, u64, String)> = Vec::new();

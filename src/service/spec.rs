@@ -10,7 +10,8 @@
 use crate::data::categories::category_index;
 use crate::engine::generate::Retrieval;
 use crate::engine::guidance::{
-    DEFAULT_GUIDED_STEPS, DEFAULT_MAX_STEP, DEFAULT_TAU, GuidanceOptions, Terms,
+    DEFAULT_GUIDED_STEPS, DEFAULT_MAX_STEP, DEFAULT_REFINE_STEPS, DEFAULT_TAU, GuidanceOptions,
+    MAX_REFINE_STEPS, Terms,
 };
 use crate::engine::sample::Sampler;
 use crate::engine::sample::{DEFAULT_CATEGORY_GUIDANCE, DEFAULT_STEPS, MAX_CATEGORY_GUIDANCE};
@@ -51,6 +52,8 @@ pub struct JobInput {
     pub tau: Option<f64>,
     /// Clamp of each guidance-gradient entry (model space; off when absent).
     pub guidance_max_step: Option<f64>,
+    /// Refinement steps after sampling (default [`DEFAULT_REFINE_STEPS`]; 0: off).
+    pub refine_steps: Option<u32>,
     /// Sampler name (`ddpm` or `ddim`).
     pub sampler: Option<String>,
     /// DDIM noise level η (only with `ddim`).
@@ -147,6 +150,8 @@ pub struct JobSpec {
     pub tau: f64,
     /// Clamp of each guidance-gradient entry (None: the paper's raw gradient).
     pub guidance_max_step: Option<f64>,
+    /// Refinement steps after sampling (0: off, the paper).
+    pub refine_steps: u32,
     /// Sampler name (`ddpm` or `ddim`).
     pub sampler: String,
     /// DDIM η (0 for `ddpm`).
@@ -444,6 +449,14 @@ pub fn validate(
             ));
         }
     };
+    let refine_steps = input.refine_steps.unwrap_or(DEFAULT_REFINE_STEPS as u32);
+    if refine_steps as usize > MAX_REFINE_STEPS {
+        return Err(violation(
+            "refine_steps",
+            format!("<= {MAX_REFINE_STEPS} (0: off)"),
+            refine_steps,
+        ));
+    }
     let samples = input.samples.unwrap_or(1);
     if samples == 0 || samples > limits.max_samples {
         return Err(violation(
@@ -532,6 +545,7 @@ pub fn validate(
         n_g,
         tau,
         guidance_max_step,
+        refine_steps,
         sampler,
         eta,
         steps,
@@ -595,6 +609,7 @@ mod tests {
         assert_eq!((s.tau, s.sampler.as_str(), s.eta), (1000.0, "ddim", 0.0));
         assert_eq!(s.engine_sampler(), Sampler::Ddim { eta: 0.0 });
         assert_eq!(s.guidance_max_step, Some(DEFAULT_MAX_STEP));
+        assert_eq!(s.refine_steps, 10);
         assert_eq!((s.w_pc, s.w_pen, s.w_mob), (15.0, 2.0 / 3.0, 2.0 / 3.0));
         assert!(s.guided());
         // Exactly the last 100 of the 200 strided times are guided, as with the CLI's
@@ -801,6 +816,11 @@ mod tests {
             );
             assert!(v.limit.contains(">= 0"), "{v}");
         }
+        let v = bad(&|i| i.refine_steps = Some(1001));
+        assert_eq!(
+            (v.field.as_str(), v.value.as_str(), v.limit.as_str()),
+            ("refine_steps", "1001", "<= 1000 (0: off)")
+        );
         let v = bad(&|i| i.points = Some(PointsInput::F32Le(vec![0; 13])));
         assert!(v.limit.contains("multiple of 12"));
         let v = bad(&|i| i.points = Some(PointsInput::Ply(b"ply\nformat nonsense\n".to_vec())));

@@ -162,6 +162,9 @@ struct SpecDoc {
     tau: f64,
     #[serde(default)]
     guidance_max_step: Option<f64>,
+    /// Absent in specs stored before refinement existed: those were accepted without it.
+    #[serde(default)]
+    refine_steps: u32,
     sampler: String,
     #[serde(default)]
     eta: f64,
@@ -192,6 +195,7 @@ fn spec_to_row(s: &JobSpec) -> (String, Vec<u8>) {
         n_g: s.n_g,
         tau: s.tau,
         guidance_max_step: s.guidance_max_step,
+        refine_steps: s.refine_steps,
         sampler: s.sampler.clone(),
         eta: s.eta,
         steps: s.steps,
@@ -235,6 +239,7 @@ fn spec_from_row(id: &str, json: &str, blob: &[u8]) -> Result<JobSpec, StoreErro
         n_g: d.n_g,
         tau: d.tau,
         guidance_max_step: d.guidance_max_step,
+        refine_steps: d.refine_steps,
         sampler: d.sampler,
         eta: d.eta,
         steps: d.steps,

@@ -45,6 +45,13 @@ pub const DEFAULT_TAU: f64 = 1000.0;
 /// raw rule one setting away (`max_step: None`; `guidance_max_step = 0` at the API / CLI).
 /// 0.05 was stable on 300 of 300 evaluation samples; 0.5 let ℓ_pc push parts into each other.
 pub const DEFAULT_MAX_STEP: f64 = 0.05;
+/// Refinement steps the CLI and the service run by default (EVALUATION.md, "Refinement").
+pub const DEFAULT_REFINE_STEPS: usize = 10;
+/// Most refinement steps accepted.
+pub const MAX_REFINE_STEPS: usize = 1000;
+/// Refinement clamps at this fraction of `max_step`. Steps of the full clamp bounce on ℓ_pc's
+/// landscape (no denoiser pulls the sample back); a tenth descends smoothly (EVALUATION.md).
+pub const REFINE_STEP_FRACTION: f64 = 0.1;
 /// Most observed points accepted.
 pub const MAX_POINTS: usize = 100_000;
 /// Largest accepted weight (beyond this a step is a jump, not guidance).
@@ -92,6 +99,10 @@ pub struct GuidanceOptions {
     /// ([`DEFAULT_MAX_STEP`]); None is the paper's raw step. With a clamp, the runaway-gradient
     /// check only rejects non-finite gradients.
     pub max_step: Option<f64>,
+    /// Refinement steps after the last reverse step (physnap, not in the paper): x₀ ← x₀ −
+    /// clamp(∇_{x₀} ℓ(x₀), ±max_step · [`REFINE_STEP_FRACTION`]) this many times, on the sample
+    /// itself (no denoiser, no noise). 0: off (the paper).
+    pub refine_steps: usize,
 }
 
 impl Default for GuidanceOptions {
@@ -119,6 +130,7 @@ impl GuidanceOptions {
             steps: DEFAULT_GUIDED_STEPS,
             tau: DEFAULT_TAU,
             max_step: Some(DEFAULT_MAX_STEP),
+            refine_steps: 0,
         }
     }
 
@@ -155,6 +167,13 @@ impl GuidanceOptions {
                 self.steps.to_string(),
             );
         }
+        if self.refine_steps > MAX_REFINE_STEPS {
+            return bad(
+                "refine_steps",
+                format!("at most {MAX_REFINE_STEPS}"),
+                self.refine_steps.to_string(),
+            );
+        }
         if self.w_pc > 0.0 && self.points.is_empty() {
             return bad(
                 "points",
@@ -182,6 +201,11 @@ impl GuidanceOptions {
             );
         }
         Ok(())
+    }
+
+    /// The clamp of a refinement step (None: raw gradient, as `max_step`).
+    pub fn refine_max_step(&self) -> Option<f64> {
+        self.max_step.map(|c| c * REFINE_STEP_FRACTION)
     }
 
     /// Whether any term has a positive weight.

@@ -470,6 +470,16 @@ fn options_follow_the_paper_and_bad_values_name_field_limit_value() {
         e.contains("guidance.points[0]") && e.contains("finite"),
         "{e}"
     );
+    let e = err(GuidanceOptions {
+        refine_steps: 1001,
+        ..all.clone()
+    });
+    assert!(
+        e.contains("guidance.refine_steps") && e.contains("1001") && e.contains("at most 1000"),
+        "{e}"
+    );
+    assert_eq!(all.refine_steps, 0, "the paper's settings do not refine");
+    assert!((all.refine_max_step().unwrap() - 0.005).abs() < 1e-12);
     let e = err(GuidanceOptions { tau: 0.0, ..all });
     assert!(e.contains("guidance.tau") && e.contains("(0, 1e9]"), "{e}");
 }

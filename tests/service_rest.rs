@@ -783,9 +783,22 @@ async fn guided_ddim_job_streams_losses_and_ranks_best_of_n() {
         .filter(|e| e.event == "progress")
         .map(|e| e.json())
         .collect();
+    // 20 reverse steps, then the default 10 refinement steps (at t = 0, each with losses).
+    assert_eq!(req["refine_steps"], 10, "{req}");
     assert!(
-        progress.iter().all(|p| p["total_steps"] == 20),
+        progress.iter().all(|p| p["total_steps"] == 30),
         "{progress:?}"
+    );
+    let refined: Vec<&Value> = progress
+        .iter()
+        .filter(|p| p["step"].as_u64().unwrap() > 20)
+        .collect();
+    assert!(!refined.is_empty(), "no refinement progress: {progress:?}");
+    assert!(
+        refined
+            .iter()
+            .all(|p| p["t"] == 0 && p.get("guidance").is_some()),
+        "{refined:?}"
     );
     // The last reverse step (t = 0) is always guided with n_g >= 1, and it is a preview.
     let guided: Vec<&Value> = progress
@@ -818,6 +831,7 @@ async fn guided_ddim_job_streams_losses_and_ranks_best_of_n() {
     assert_eq!(ranking["format"], "physnap.job_ranking/v1");
     assert_eq!(ranking["guided"], true);
     assert_eq!(ranking["guidance"]["n_g"], 10);
+    assert_eq!(ranking["guidance"]["refine_steps"], 10);
     assert_eq!(ranking["retrieval"], "off");
     let rows = ranking["samples"].as_array().unwrap();
     assert_eq!(rows.len(), 2, "{ranking:#}");
@@ -862,6 +876,7 @@ async fn guidance_and_sampler_fields_are_validated() {
             "guidance_max_step",
             "-1",
         ),
+        (json!({"refine_steps": 1001}), "refine_steps", "1001"),
         (json!({"retrieval": "nearest"}), "retrieval", "\"nearest\""),
         // The test weights have no codebook: only off / auto are possible.
         (json!({"retrieval": "empty"}), "retrieval", "\"empty\""),

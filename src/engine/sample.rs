@@ -688,20 +688,13 @@ mod tests {
             .into_scalar::<f32>() as f64
     }
 
-    #[test]
-    fn guided_sampling_lowers_the_loss_reports_it_and_is_deterministic() {
-        let model = tiny();
-        let field = tiny_field();
+    /// Scales, schedule and guidance under which a random tiny model's guidance descends.
+    fn guided_setup() -> (FeatureScales, Schedule, GuidanceOptions) {
         // Realistic raw sizes (boxes and centres ~0.2 m per unit of model space).
         let mut scales = FeatureScales::default();
         for c in 1..7 {
             scales.node[c] = 0.2;
         }
-        let ctx = GuidanceContext {
-            field: &field,
-            scales: &scales,
-        };
-        let points = cloud();
         // A random model is no denoiser: over NAP's 1000 steps its samples run off to |x| ~ 1e3.
         // A short schedule (ᾱ ≥ 0.6) keeps x̂₀ in a physical range, so guidance acts as on a
         // trained model.
@@ -713,8 +706,21 @@ mod tests {
             w_pc: 0.2,
             w_pen: 0.01,
             w_mob: 0.01,
-            ..GuidanceOptions::paper(points.clone(), super::super::guidance::Terms::ALL)
+            ..GuidanceOptions::paper(cloud(), super::super::guidance::Terms::ALL)
         };
+        (scales, schedule, guidance)
+    }
+
+    #[test]
+    fn guided_sampling_lowers_the_loss_reports_it_and_is_deterministic() {
+        let model = tiny();
+        let field = tiny_field();
+        let (scales, schedule, guidance) = guided_setup();
+        let ctx = GuidanceContext {
+            field: &field,
+            scales: &scales,
+        };
+        let points = guidance.points.clone();
         let req = SampleRequest {
             seed: 5,
             batch: 1,
@@ -771,22 +777,10 @@ mod tests {
     fn refinement_descends_the_guidance_loss_after_the_last_step() {
         let model = tiny();
         let field = tiny_field();
-        let mut scales = FeatureScales::default();
-        for c in 1..7 {
-            scales.node[c] = 0.2;
-        }
+        let (scales, schedule, base) = guided_setup();
         let ctx = GuidanceContext {
             field: &field,
             scales: &scales,
-        };
-        let points = cloud();
-        let schedule = Schedule::linear(40, 1e-3, 0.02);
-        let base = GuidanceOptions {
-            steps: 20,
-            w_pc: 0.2,
-            w_pen: 0.01,
-            w_mob: 0.01,
-            ..GuidanceOptions::paper(points.clone(), super::super::guidance::Terms::ALL)
         };
         let run = |refine_steps: usize, events: &mut Vec<(usize, usize, usize, f64)>| {
             let req = SampleRequest {

@@ -50,6 +50,10 @@ pub const DEFAULT_STEPS: usize = 200;
 /// about [−1, 1]); a step that throws a value this far is a blow-up and fails as diverged.
 pub const DIVERGENCE_LIMIT: f32 = 1e4;
 
+/// Mixed into the seed for the stream of ℓ_mob's joint states (`Rng::fork(seed ^ this, step)`),
+/// apart from the diffusion noise.
+const MOB_STREAM: u64 = 0x4755_4944_414e_4345;
+
 /// The category guidance weight the CLI and the service use by default (see EVALUATION.md,
 /// "Category guidance").
 pub const DEFAULT_CATEGORY_GUIDANCE: f64 = 2.0;
@@ -299,7 +303,7 @@ pub fn sample_guided(
             let (sv, se) = scale_tensors.clone().expect("scales with guidance");
             let x0v = (va.clone() - ev.clone() * n) / s * sv.autodiff();
             let x0e = (ea.clone() - ee.clone() * n) / s * se.autodiff();
-            let mut mob_rng = Rng::fork(req.seed ^ 0x4755_4944_414e_4345, k as u64);
+            let mut mob_rng = Rng::fork(req.seed ^ MOB_STREAM, k as u64);
             let (grad, values) = guidance_gradient(
                 ctx.field,
                 g,
@@ -373,7 +377,7 @@ pub fn sample_guided(
             let ea = e.clone().autodiff().require_grad();
             let x0v = va.clone() * sv.clone().autodiff();
             let x0e = ea.clone() * se.clone().autodiff();
-            let mut mob_rng = Rng::fork(req.seed ^ 0x4755_4944_414e_4345, (step - 1) as u64);
+            let mut mob_rng = Rng::fork(req.seed ^ MOB_STREAM, (step - 1) as u64);
             let (grad, values) = guidance_gradient(
                 ctx.field,
                 g,

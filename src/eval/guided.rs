@@ -925,6 +925,16 @@ mod tests {
             .collect();
         assert_eq!(labels, want);
         assert!(rows.iter().all(|r| r.samples + r.diverged == 1));
+        // Every sample is on record with its cloud and seed, diverged ones without metrics.
+        for r in &rows {
+            assert_eq!(r.per_sample.len(), 1, "{r:?}");
+            let s = &r.per_sample[0];
+            assert_eq!((s.cloud.as_str(), s.seed), ("c0", 0));
+            assert_eq!(s.metrics.is_none(), r.diverged == 1);
+            if let Some(m) = s.metrics {
+                assert_eq!(m[0], r.e_pc, "a single sample is its own median");
+            }
+        }
         let md = table_markdown(&rows);
         assert_eq!(md.lines().count(), 12);
         assert!(md.contains("| yes | pc+pen+mob |"), "{md}");

@@ -289,7 +289,7 @@ pub fn sample_guided(
     });
     let times = timesteps(schedule.len(), req.steps);
     let full = times.len() == schedule.len();
-    let total = times.len() + guidance.map_or(0, |(g, _)| g.refine_steps);
+    let total = step_events(schedule.len(), req.steps, guidance.map(|(g, _)| g));
     for (k, &t) in times.iter().enumerate() {
         let t_prev = times.get(k + 1).copied();
         let (s, n) = schedule.noise_coefficients(t);
@@ -410,6 +410,15 @@ pub fn sample_guided(
         }
     }
     Ok(from_tensors(v, e))
+}
+
+/// How many [`StepEvent`]s a sample reports (its `total`): the reverse steps of `steps` (0: all
+/// of a `schedule_len` schedule), plus the refinement steps of an active guidance.
+pub fn step_events(schedule_len: usize, steps: usize, guidance: Option<&GuidanceOptions>) -> usize {
+    timesteps(schedule_len, steps).len()
+        + guidance
+            .filter(|g| g.is_active())
+            .map_or(0, |g| g.refine_steps)
 }
 
 /// Per-entry gradients of ℓ with respect to the (autodiff) nodes and edges.

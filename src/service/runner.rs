@@ -26,7 +26,8 @@ use std::time::Instant;
 use crate::engine::EngineError;
 use crate::engine::generate::{GenerateRequest, Generated, PartShapes, generate_with};
 use crate::engine::guidance::{GuidanceLosses, GuidanceOptions, SdfField};
-use crate::engine::schedule::{Schedule, timesteps};
+use crate::engine::sample::step_events;
+use crate::engine::schedule::Schedule;
 use crate::eval::guided::d_pc;
 use crate::export::{ExportError, ExportOptions, glb, urdf, zip_bundle};
 use crate::graph::{ProjectOptions, project};
@@ -285,8 +286,11 @@ pub fn run_job(
     };
     let decoder = LatentSdfDecoder::new(&m.shape_prior.decoder);
     let started = Instant::now();
-    let per_sample = timesteps(models.schedule.len(), spec.steps as usize).len()
-        + guidance.as_ref().map_or(0, |g| g.refine_steps);
+    let per_sample = step_events(
+        models.schedule.len(),
+        spec.steps as usize,
+        guidance.as_ref(),
+    );
     let total_all = spec.samples as usize * per_sample;
     let mut done_samples: Vec<Generated> = Vec::new();
     let mut diverged: Vec<(usize, u64, String)> = Vec::new();

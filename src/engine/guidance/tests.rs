@@ -437,51 +437,57 @@ fn options_follow_the_paper_and_bad_values_name_field_limit_value() {
     assert_eq!((pc_pen.w_pc, pc_pen.w_pen, pc_pen.w_mob), (22.5, 1.0, 0.0));
     assert_eq!((all.steps, all.tau), (500, 1000.0));
     assert!(all.validate(1000).is_ok());
-    let err = |o: GuidanceOptions| o.validate(1000).unwrap_err().to_string();
-    let e = err(GuidanceOptions {
-        w_pen: -1.0,
-        ..all.clone()
-    });
-    assert!(
-        e.contains("guidance.w_pen") && e.contains("-1") && e.contains("[0, "),
-        "{e}"
-    );
-    let e = err(GuidanceOptions {
-        steps: 1001,
-        ..all.clone()
-    });
-    assert!(
-        e.contains("guidance.steps") && e.contains("1001") && e.contains("1000"),
-        "{e}"
-    );
-    let e = err(GuidanceOptions {
-        points: vec![],
-        ..all.clone()
-    });
-    assert!(
-        e.contains("guidance.points") && e.contains("0 points"),
-        "{e}"
-    );
-    let e = err(GuidanceOptions {
-        points: vec![[0.0, f32::NAN, 0.0]],
-        ..all.clone()
-    });
-    assert!(
-        e.contains("guidance.points[0]") && e.contains("finite"),
-        "{e}"
-    );
-    let e = err(GuidanceOptions {
-        refine_steps: 1001,
-        ..all.clone()
-    });
-    assert!(
-        e.contains("guidance.refine_steps") && e.contains("1001") && e.contains("at most 1000"),
-        "{e}"
-    );
     assert_eq!(all.refine_steps, 0, "the paper's settings do not refine");
     assert!((all.refine_max_step().unwrap() - 0.005).abs() < 1e-12);
-    let e = err(GuidanceOptions { tau: 0.0, ..all });
-    assert!(e.contains("guidance.tau") && e.contains("(0, 1e9]"), "{e}");
+    // Each bad field is refused with a message naming the field, the value and the limit.
+    let cases: [(GuidanceOptions, &[&str]); 6] = [
+        (
+            GuidanceOptions {
+                w_pen: -1.0,
+                ..all.clone()
+            },
+            &["guidance.w_pen", "-1", "[0, "],
+        ),
+        (
+            GuidanceOptions {
+                steps: 1001,
+                ..all.clone()
+            },
+            &["guidance.steps", "1001", "1000"],
+        ),
+        (
+            GuidanceOptions {
+                points: vec![],
+                ..all.clone()
+            },
+            &["guidance.points", "0 points"],
+        ),
+        (
+            GuidanceOptions {
+                points: vec![[0.0, f32::NAN, 0.0]],
+                ..all.clone()
+            },
+            &["guidance.points[0]", "finite"],
+        ),
+        (
+            GuidanceOptions {
+                refine_steps: 1001,
+                ..all.clone()
+            },
+            &["guidance.refine_steps", "1001", "at most 1000"],
+        ),
+        (
+            GuidanceOptions { tau: 0.0, ..all },
+            &["guidance.tau", "(0, 1e9]"],
+        ),
+    ];
+    for (bad, want) in cases {
+        let e = bad.validate(1000).unwrap_err().to_string();
+        assert!(
+            want.iter().all(|w| e.contains(w)),
+            "{e} should name {want:?}"
+        );
+    }
 }
 
 #[test]

@@ -7,13 +7,15 @@
 //! result by the part's box: v_object = t + κ·q with κ = 2‖b‖₂ (PhysNAP's fixed mapping,
 //! method.md §8.3 and §9 A3; NAP's post-hoc rescaling is not applied).
 //!
-//! Grid evaluation is batched per z-slab through [`Sdf::eval_batch`] and runs in parallel on
-//! the current rayon pool, so a neural decoder sees thousands of points per call.
+//! The grid is sampled by a narrow-band octree ([`sampling`]): only blocks of cells the surface
+//! can cross are decoded, in batches through [`Sdf::eval_batch`] that run in parallel on the
+//! current rayon pool; the mesh equals the dense grid's while the field is 3-Lipschitz.
 
 pub mod bvh;
 pub mod marching_cubes;
 pub mod obj;
 pub mod primitives;
+pub mod sampling;
 
 use nalgebra::Vector3;
 use rayon::prelude::*;
@@ -130,29 +132,20 @@ pub fn extract_normalised(sdf: &dyn Sdf, opts: &MeshingOptions) -> CoreResult<Tr
     let n = r + 3;
     let origin = -DOMAIN_HALF - spacing;
     let coord = |i: usize| origin + spacing * i as f32;
+    // The (r + 1)³ interior samples, decoded only near the surface (sampling.rs).
+    let m = r + 1;
+    let interior = sampling::sample_grid(sdf, r, spacing, &|i| coord(i + 1));
     let mut values = vec![1e6f32; n * n * n];
-    values
-        .par_chunks_mut(n * n)
-        .enumerate()
-        .filter(|(k, _)| (1..n - 1).contains(k))
-        .for_each(|(k, slab)| {
-            let mut pts = Vec::with_capacity((n - 2) * (n - 2));
-            for j in 1..n - 1 {
-                for i in 1..n - 1 {
-                    pts.push([coord(i), coord(j), coord(k)]);
-                }
+    for k in 0..m {
+        for j in 0..m {
+            let src = &interior[m * (j + m * k)..m * (j + 1 + m * k)];
+            let dst = &mut values[1 + n * (j + 1 + n * (k + 1))..][..m];
+            for (d, &v) in dst.iter_mut().zip(src) {
+                // Non-finite decoder output counts as outside, so meshing never fails on it.
+                *d = if v.is_finite() { v } else { 1e6 };
             }
-            let mut out = vec![0.0f32; pts.len()];
-            sdf.eval_batch(&pts, &mut out);
-            let mut it = out.into_iter();
-            for j in 1..n - 1 {
-                for i in 1..n - 1 {
-                    // Non-finite decoder output counts as outside, so meshing never fails on it.
-                    let v = it.next().unwrap_or(1e6);
-                    slab[i + n * j] = if v.is_finite() { v } else { 1e6 };
-                }
-            }
-        });
+        }
+    }
     let grid = marching_cubes::ScalarGrid {
         dims: [n, n, n],
         origin: [origin; 3],

@@ -16,6 +16,20 @@
 //! crate, the kernel burn's Flex backend uses too), and blocks run in parallel on the current
 //! rayon pool. Same function as [`ShapeDecoder::sdf_with_features`] up to float summation order
 //! (tested to 1e-5 relative).
+//!
+//! It also gives the *input* gradients of f per row ([`HostDecoder::eval_with_grads`]): a batch
+//! row depends only on its own point and code, so one backward pass seeded with ones yields
+//! ∂f/∂q [Q, 3] and ∂f/∂h₀ [Q, hidden] (h₀'s code term is z W_c + b_c, so ∂f/∂z = W_cᵀ ∂f/∂h₀)
+//! at the cost of one more GEMM per layer and no weight gradients:
+//!
+//! ```text
+//! g_L = w_out ⊙ LeakyReLU'(h_L)
+//! g_l = (g_{l+1} or g_{l+1} Sᵀ) + ((g_{l+1} W₁ᵀ ⊙ [t > 0]) W₀ᵀ) ⊙ [h_l > 0]
+//! ∂f/∂γ = g₀ W_pᵀ,   ∂f/∂q_c = ∂f/∂γ_c + Σ_f 2^f (−sin(2^f q_c) ∂f/∂cos_cf + cos(2^f q_c) ∂f/∂sin_cf)
+//! ```
+//!
+//! Guidance's differentiable SDF passes use these through a first-order surrogate in burn
+//! (`engine::guidance::field`), instead of recording every decoder layer on burn's autodiff tape.
 
 use burn::nn::Linear;
 use rayon::prelude::*;
@@ -68,13 +82,25 @@ impl HostLinear {
 
 /// `dst` [m, n] += `a` [m, k] · `b` [k, n], all row-major and contiguous.
 fn matmul_acc(dst: &mut [f32], a: &[f32], b: &[f32], m: usize, k: usize, n: usize) {
+    gemm_acc(dst, a, b, m, k, n, false);
+}
+
+/// `dst` [m, n] += `a` [m, k] · `b`ᵀ for `b` [n, k], all row-major and contiguous.
+fn matmul_bt_acc(dst: &mut [f32], a: &[f32], b: &[f32], m: usize, k: usize, n: usize) {
+    gemm_acc(dst, a, b, m, k, n, true);
+}
+
+/// `dst` [m, n] += `a` [m, k] · B, B = `b` [k, n] or, transposed, `b`ᵀ with `b` [n, k].
+fn gemm_acc(dst: &mut [f32], a: &[f32], b: &[f32], m: usize, k: usize, n: usize, bt: bool) {
     assert!(dst.len() >= m * n && a.len() >= m * k && b.len() >= k * n);
+    // (column stride, row stride) of B inside `b`.
+    let (b_cs, b_rs) = if bt { (k as isize, 1) } else { (1, n as isize) };
     if m == 0 || n == 0 || k == 0 {
         return;
     }
     // SAFETY: the three buffers hold at least m·n, m·k and k·n elements (asserted above), the
-    // strides describe contiguous row-major matrices inside them, and `dst` is a unique borrow
-    // that does not alias `a` or `b`.
+    // strides describe contiguous row-major matrices (B possibly read transposed) inside them,
+    // and `dst` is a unique borrow that does not alias `a` or `b`.
     unsafe {
         gemm::gemm(
             m,
@@ -88,8 +114,8 @@ fn matmul_acc(dst: &mut [f32], a: &[f32], b: &[f32], m: usize, k: usize, n: usiz
             1,
             k as isize,
             b.as_ptr(),
-            1,
-            n as isize,
+            b_cs,
+            b_rs,
             1.0f32,
             1.0f32,
             false,
@@ -108,12 +134,34 @@ struct HostBlock {
     shortcut: Option<HostLinear>,
 }
 
-/// Per-thread activation buffers for one block of rows.
+/// Per-thread activation buffers for one block of rows: every layer's input and hidden
+/// activation is kept (the backward pass reads them), plus gradient buffers when asked for.
 struct Scratch {
+    /// γ(q) [rows, pe_dim].
     pe: Vec<f32>,
-    h: Vec<f32>,
+    /// h_0 … h_L, each [rows, width].
+    hs: Vec<Vec<f32>>,
+    /// t_l = ReLU(ReLU(h_l) W₀ + b₀) per block, [rows, width].
+    ts: Vec<Vec<f32>>,
+    /// ReLU(h_l) in the forward pass; g W₁ᵀ in the backward pass.
     a: Vec<f32>,
-    t: Vec<f32>,
+    /// Backward: ∂f/∂h_l and the next one, [rows, width] (empty for value-only scratch).
+    g: Vec<f32>,
+    g_next: Vec<f32>,
+    /// Backward: ∂f/∂γ [rows, pe_dim].
+    g_pe: Vec<f32>,
+}
+
+/// Per-row values and input gradients of the decoder ([`HostDecoder::eval_with_grads`]).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct InputGrads {
+    /// f per row, [Q] (equal to [`HostDecoder::eval`]'s output).
+    pub values: Vec<f32>,
+    /// ∂f/∂q per row, [Q].
+    pub d_points: Vec<[f32; 3]>,
+    /// ∂f/∂h₀ per row, [Q × hidden] flat: the gradient with respect to the row's code features
+    /// (z W_c + b_c).
+    pub d_features: Vec<f32>,
 }
 
 /// The decoder's weights on the host (see the module docs).
@@ -173,6 +221,15 @@ impl HostDecoder {
         out
     }
 
+    fn check_inputs(&self, q: &[[f32; 3]], features: &[f32], idx: &[usize]) {
+        assert_eq!(q.len(), idx.len(), "one part index per point");
+        let hidden = self.hidden();
+        assert!(
+            idx.iter().all(|&i| (i + 1) * hidden <= features.len()),
+            "part index past the code features"
+        );
+    }
+
     /// f at normalised points `q` for the code features `features[idx[r]]` (rows of
     /// [`HostDecoder::code_features`]) → `out` [Q]. Blocks of rows run in parallel on the
     /// current rayon pool.
@@ -180,34 +237,68 @@ impl HostDecoder {
     /// # Panics
     /// When `idx`, `q` and `out` differ in length or an index is past the features.
     pub fn eval(&self, q: &[[f32; 3]], features: &[f32], idx: &[usize], out: &mut [f32]) {
-        assert_eq!(q.len(), idx.len(), "one part index per point");
+        self.check_inputs(q, features, idx);
         assert_eq!(q.len(), out.len(), "one output per point");
-        let hidden = self.hidden();
-        assert!(
-            idx.iter().all(|&i| (i + 1) * hidden <= features.len()),
-            "part index past the code features"
-        );
         out.par_chunks_mut(BLOCK_ROWS)
             .zip(q.par_chunks(BLOCK_ROWS))
             .zip(idx.par_chunks(BLOCK_ROWS))
             .for_each_init(
-                || self.scratch(),
-                |s, ((o, q), idx)| self.eval_block(q, features, idx, o, s),
+                || self.scratch(false),
+                |s, ((o, q), idx)| self.forward_block(q, features, idx, o, s),
             );
     }
 
-    fn scratch(&self) -> Scratch {
+    /// [`HostDecoder::eval`] plus the input gradients of every row (module docs), without
+    /// any weight gradient.
+    ///
+    /// # Panics
+    /// When `idx` and `q` differ in length or an index is past the features.
+    pub fn eval_with_grads(&self, q: &[[f32; 3]], features: &[f32], idx: &[usize]) -> InputGrads {
+        self.check_inputs(q, features, idx);
+        let hidden = self.hidden();
+        let mut g = InputGrads {
+            values: vec![0.0; q.len()],
+            d_points: vec![[0.0; 3]; q.len()],
+            d_features: vec![0.0; q.len() * hidden],
+        };
+        g.values
+            .par_chunks_mut(BLOCK_ROWS)
+            .zip(g.d_points.par_chunks_mut(BLOCK_ROWS))
+            .zip(g.d_features.par_chunks_mut(BLOCK_ROWS * hidden))
+            .zip(q.par_chunks(BLOCK_ROWS))
+            .zip(idx.par_chunks(BLOCK_ROWS))
+            .for_each_init(
+                || self.scratch(true),
+                |s, ((((o, dq), dh), q), idx)| {
+                    self.forward_block(q, features, idx, o, s);
+                    self.backward_block(q, dq, dh, s);
+                },
+            );
+        g
+    }
+
+    fn scratch(&self, grads: bool) -> Scratch {
         let pe_dim = self.fc_p.d_in;
+        let buf = |n: usize| vec![0.0; BLOCK_ROWS * n];
+        let (g, g_pe) = if grads {
+            (buf(self.width), buf(pe_dim))
+        } else {
+            (Vec::new(), Vec::new())
+        };
         Scratch {
-            pe: vec![0.0; BLOCK_ROWS * pe_dim],
-            h: vec![0.0; BLOCK_ROWS * self.width],
-            a: vec![0.0; BLOCK_ROWS * self.width],
-            t: vec![0.0; BLOCK_ROWS * self.width],
+            pe: buf(pe_dim),
+            hs: (0..=self.blocks.len()).map(|_| buf(self.width)).collect(),
+            ts: self.blocks.iter().map(|_| buf(self.width)).collect(),
+            a: buf(self.width),
+            g_next: g.clone(),
+            g,
+            g_pe,
         }
     }
 
-    /// One block of at most [`BLOCK_ROWS`] rows through the whole network.
-    fn eval_block(
+    /// One block of at most [`BLOCK_ROWS`] rows through the whole network, keeping every
+    /// layer's activations in `s`.
+    fn forward_block(
         &self,
         q: &[[f32; 3]],
         features: &[f32],
@@ -232,43 +323,124 @@ impl HostDecoder {
                 }
             }
         }
-        // h = features[idx] + γ W_p + b_p.
+        // h₀ = features[idx] + γ W_p + b_p.
         let hidden = self.hidden();
         for (r, &i) in idx.iter().enumerate() {
-            s.h[r * hidden..(r + 1) * hidden]
+            s.hs[0][r * hidden..(r + 1) * hidden]
                 .copy_from_slice(&features[i * hidden..(i + 1) * hidden]);
         }
-        self.fc_p.apply(&s.pe, &mut s.h, rows, true);
+        self.fc_p.apply(&s.pe, &mut s.hs[0], rows, true);
         let mut width = hidden;
-        for b in &self.blocks {
-            // a = ReLU(h); t = ReLU(a W₀ + b₀).
+        for (l, b) in self.blocks.iter().enumerate() {
+            let (done, rest) = s.hs.split_at_mut(l + 1);
+            let (h, h_next) = (&done[l], &mut rest[0]);
+            // a = ReLU(h_l); t_l = ReLU(a W₀ + b₀).
             let n_in = rows * width;
             s.a[..n_in]
                 .iter_mut()
-                .zip(&s.h[..n_in])
+                .zip(&h[..n_in])
                 .for_each(|(a, h)| *a = h.max(0.0));
-            b.fc_0.apply(&s.a, &mut s.t, rows, false);
-            s.t[..rows * b.fc_0.d_out]
+            let t = &mut s.ts[l];
+            b.fc_0.apply(&s.a, t, rows, false);
+            t[..rows * b.fc_0.d_out]
                 .iter_mut()
                 .for_each(|v| *v = v.max(0.0));
-            // h ← (h or S h) + t W₁ + b₁.
-            if let Some(sc) = &b.shortcut {
-                sc.apply(&s.h, &mut s.a, rows, false);
-                std::mem::swap(&mut s.h, &mut s.a);
+            // h_{l+1} = (h_l or S h_l) + t_l W₁ + b₁.
+            match &b.shortcut {
+                Some(sc) => sc.apply(h, h_next, rows, false),
+                None => h_next[..n_in].copy_from_slice(&h[..n_in]),
             }
-            b.fc_1.apply(&s.t, &mut s.h, rows, true);
+            b.fc_1.apply(t, h_next, rows, true);
             width = b.fc_1.d_out;
         }
+        let h = &s.hs[self.blocks.len()];
         let w = &self.fc_out.w;
         let bias = self.fc_out.b.as_ref().map_or(0.0, |b| b[0]);
         for (r, o) in out.iter_mut().enumerate() {
-            let h = &s.h[r * width..(r + 1) * width];
+            let h = &h[r * width..(r + 1) * width];
             *o = h
                 .iter()
                 .zip(w)
                 .map(|(&h, &w)| if h >= 0.0 { h } else { 0.2 * h } * w)
                 .sum::<f32>()
                 + bias;
+        }
+    }
+
+    /// The backward pass of the block just run by [`HostDecoder::forward_block`] (module docs),
+    /// seeded with ∂f/∂f = 1 per row: writes ∂f/∂q into `d_points` and ∂f/∂h₀ into
+    /// `d_features` [rows × hidden].
+    fn backward_block(
+        &self,
+        q: &[[f32; 3]],
+        d_points: &mut [[f32; 3]],
+        d_features: &mut [f32],
+        s: &mut Scratch,
+    ) {
+        let rows = q.len();
+        let last = self.blocks.last().map_or(self.hidden(), |b| b.fc_1.d_out);
+        // g_L = w_out ⊙ LeakyReLU'(h_L).
+        let w = &self.fc_out.w;
+        for (g, h) in s.g[..rows * last]
+            .chunks_exact_mut(last)
+            .zip(s.hs[self.blocks.len()].chunks_exact(last))
+        {
+            for ((g, &h), &w) in g.iter_mut().zip(h).zip(w) {
+                *g = if h >= 0.0 { w } else { 0.2 * w };
+            }
+        }
+        for (l, b) in self.blocks.iter().enumerate().rev() {
+            let (w_in, mid, w_out) = (b.fc_0.d_in, b.fc_0.d_out, b.fc_1.d_out);
+            // a = (g W₁ᵀ) ⊙ [t_l > 0].
+            s.a[..rows * mid].fill(0.0);
+            matmul_bt_acc(&mut s.a, &s.g, &b.fc_1.w, rows, w_out, mid);
+            s.a[..rows * mid]
+                .iter_mut()
+                .zip(&s.ts[l][..rows * mid])
+                .for_each(|(a, &t)| {
+                    if t <= 0.0 {
+                        *a = 0.0
+                    }
+                });
+            // g_next = (a W₀ᵀ) ⊙ [h_l > 0] + (g or g Sᵀ).
+            s.g_next[..rows * w_in].fill(0.0);
+            matmul_bt_acc(&mut s.g_next, &s.a, &b.fc_0.w, rows, mid, w_in);
+            s.g_next[..rows * w_in]
+                .iter_mut()
+                .zip(&s.hs[l][..rows * w_in])
+                .for_each(|(g, &h)| {
+                    if h <= 0.0 {
+                        *g = 0.0
+                    }
+                });
+            match &b.shortcut {
+                Some(sc) => matmul_bt_acc(&mut s.g_next, &s.g, &sc.w, rows, w_out, w_in),
+                None => s.g_next[..rows * w_in]
+                    .iter_mut()
+                    .zip(&s.g[..rows * w_in])
+                    .for_each(|(n, g)| *n += g),
+            }
+            std::mem::swap(&mut s.g, &mut s.g_next);
+        }
+        let hidden = self.hidden();
+        d_features[..rows * hidden].copy_from_slice(&s.g[..rows * hidden]);
+        // ∂f/∂γ = g₀ W_pᵀ, then through γ to q.
+        let (nf, pe_dim) = (self.pe_freqs, self.fc_p.d_in);
+        s.g_pe[..rows * pe_dim].fill(0.0);
+        matmul_bt_acc(&mut s.g_pe, &s.g, &self.fc_p.w, rows, hidden, pe_dim);
+        for (r, (p, d)) in q.iter().zip(d_points.iter_mut()).enumerate() {
+            let g = &s.g_pe[r * pe_dim..(r + 1) * pe_dim];
+            for (c, &v) in p.iter().enumerate() {
+                let mut acc = g[c];
+                let mut scale = 1.0f32;
+                for f in 0..nf {
+                    let x = v * scale;
+                    acc += scale
+                        * (-x.sin() * g[3 + c * nf + f] + x.cos() * g[3 + 3 * nf + c * nf + f]);
+                    scale *= 2.0;
+                }
+                d[c] = acc;
+            }
         }
     }
 }

@@ -628,15 +628,21 @@ pub(crate) mod tests {
                     let _ = to_vec(x.grad(&grads).unwrap());
                     let _ = to_vec(z.grad(&grads).unwrap());
                 });
+                let bwd_host = median_secs(9, || {
+                    let g = host.eval_with_grads(&q, &host.code_features(&codes), &idx);
+                    assert_eq!(g.values.len(), p * n);
+                });
                 let total = (p * n) as f64;
                 println!(
-                    "decoder {name} P={p} N={n}: fwd {:.0} points/s ({:.1} ms), host fwd {:.0} points/s ({:.1} ms), fwd+bwd(points, codes) {:.0} points/s ({:.1} ms), threads {}",
+                    "decoder {name} P={p} N={n}: fwd {:.0} points/s ({:.1} ms), host fwd {:.0} points/s ({:.1} ms), fwd+bwd(points, codes) {:.0} points/s ({:.1} ms), host fwd+input grads {:.0} points/s ({:.1} ms), threads {}",
                     total / fwd,
                     fwd * 1e3,
                     total / fwd_host,
                     fwd_host * 1e3,
                     total / bwd,
                     bwd * 1e3,
+                    total / bwd_host,
+                    bwd_host * 1e3,
                     rayon::current_num_threads()
                 );
             }

@@ -15,9 +15,16 @@
 //!
 //! ‖·‖ is evaluated as √(x² + ε²) − ε with ε = 1e-6, so its gradient is 0 (not NaN) inside the
 //! box.
+//!
+//! The learned decoder's differentiable call runs its layers on the host (values and per-row
+//! input gradients, `HostDecoder::eval_with_grads`) and hands burn a first-order surrogate with
+//! the same value and gradient (see `impl SdfField for LatentSdfDecoder`): burn's autodiff tape
+//! then holds a few element-wise ops per call instead of every decoder layer.
 
 use burn::tensor::{Int, Tensor, TensorData};
 
+#[cfg(doc)]
+use crate::model::host_decoder::HostDecoder;
 use crate::model::shape_prior::{LatentSdfDecoder, ShapeDecoder};
 
 /// ε of the smooth norm.
@@ -70,8 +77,42 @@ impl SdfField for LatentSdfDecoder {
         self.decoder().latent()
     }
 
+    /// The decoder runs on the host ([`HostDecoder::eval_with_grads`]: values and per-row
+    /// input gradients, no autodiff tape); burn only sees the first-order surrogate
+    ///
+    /// ```text
+    /// f̃ = f + Σ_c (q − sg(q))_c ∂f/∂q_c + Σ_k (h − sg(h))_k ∂f/∂h_k,   h = (z W_c + b_c)[idx]
+    /// ```
+    ///
+    /// (sg: stop-gradient), whose value is f exactly and whose gradient with respect to q and z
+    /// is the decoder's. Falls back to the burn decoder if a tensor cannot be read as f32 / i64.
     fn sdf(&self, q: Tensor<2>, codes: Tensor<2>, idx: Tensor<1, Int>) -> Tensor<1> {
-        SdfField::sdf(self.decoder(), q, codes, idx)
+        let host_codes = codes.clone().detach().into_data().try_to_vec::<f32>().ok();
+        let host_idx = idx
+            .clone()
+            .into_data()
+            .convert::<i64>()
+            .try_to_vec::<i64>()
+            .ok();
+        let (Some(points), Some(host_codes), Some(host_idx)) =
+            (host_points(&q), host_codes, host_idx)
+        else {
+            return SdfField::sdf(self.decoder(), q, codes, idx);
+        };
+        let host = self.host();
+        let hidden = host.hidden();
+        let rows: Vec<usize> = host_idx.iter().map(|&i| i as usize).collect();
+        let g = host.eval_with_grads(&points, &host.code_features(&host_codes), &rows);
+        let (n, device) = (points.len(), q.device());
+        let values = Tensor::<1>::from_data(TensorData::new(g.values, [n]), &device);
+        let d_points: Vec<f32> = g.d_points.into_iter().flatten().collect();
+        let d_points = Tensor::<2>::from_data(TensorData::new(d_points, [n, 3]), &device);
+        let d_features =
+            Tensor::<2>::from_data(TensorData::new(g.d_features, [n, hidden]), &device);
+        let features = self.decoder().code_features(codes).select(0, idx);
+        let dq = (q.clone() - q.detach()) * d_points;
+        let dh = (features.clone() - features.detach()) * d_features;
+        values + dq.sum_dim(1).reshape([n]) + dh.sum_dim(1).reshape([n])
     }
 
     fn sdf_values(&self, q: &[[f32; 3]], codes: &[f32], idx: &[usize]) -> Vec<f32> {

@@ -658,3 +658,62 @@ fn value_only_part_sdf_equals_the_differentiable_one() {
         }
     }
 }
+
+/// The learned field's differentiable SDF (host decoder + first-order surrogate) has the burn
+/// decoder's value and the gradients that burn's autodiff takes through every decoder layer,
+/// with respect to the points and the codes, under a non-uniform upstream gradient.
+#[test]
+fn host_decoder_gradients_equal_burn_autodiff() {
+    use crate::model::shape_prior::LatentSdfDecoder;
+    use crate::model::shape_prior::tests::randomised;
+    for (seed, pe_freqs, blocks) in [(31, 4, 2), (32, 0, 1), (33, 8, 0)] {
+        let cfg = ShapePriorConfig {
+            latent: LATENT,
+            decoder_hidden: 32,
+            decoder_blocks: blocks,
+            encoder_hidden: 8,
+            encoder_blocks: 1,
+            pe_freqs,
+        };
+        let mut rng = Rng::new(seed);
+        let learned =
+            LatentSdfDecoder::new(&randomised(ShapeDecoder::new(&cfg, &mut rng, &cpu()), 7));
+        let dev = cpu_autodiff();
+        let (p, n) = (3, 700); // several 128-row blocks and a partial one
+        let mut draw = |len: usize, lo: f64, hi: f64| -> Vec<f32> {
+            (0..len).map(|_| rng.range(lo, hi) as f32).collect()
+        };
+        let (q, codes, w) = (
+            draw(n * 3, -0.6, 0.6),
+            draw(p * LATENT, -1.0, 1.0),
+            draw(n, 0.5, 2.0),
+        );
+        let idx: Vec<usize> = (0..n).map(|a| (a * 7 + a / 5) % p).collect();
+        let run = |field: &dyn SdfField| -> [Vec<f32>; 3] {
+            let t2 = |v: &Vec<f32>, c: usize| {
+                Tensor::<2>::from_data(TensorData::new(v.clone(), [v.len() / c, c]), &dev)
+            };
+            let (qt, ct) = (t2(&q, 3).require_grad(), t2(&codes, LATENT).require_grad());
+            let s = field.sdf(qt.clone(), ct.clone(), grid::index_tensor(&idx, &dev));
+            let wt = Tensor::<1>::from_data(TensorData::new(w.clone(), [n]), &dev);
+            let g = (s.clone().powi_scalar(2) * wt).sum().backward();
+            let flat = |t: &Tensor<2>| -> Vec<f32> {
+                t.grad(&g).unwrap().into_data().try_to_vec().unwrap()
+            };
+            [s.into_data().try_to_vec().unwrap(), flat(&qt), flat(&ct)]
+        };
+        let host = run(&learned);
+        let burn = run(learned.decoder());
+        for (name, (h, b)) in ["value", "∂/∂q", "∂/∂z"].iter().zip(host.iter().zip(&burn)) {
+            assert_eq!(h.len(), b.len());
+            let scale = b.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+            assert!(scale > 0.0, "{name}: all zero");
+            for (a, (x, y)) in h.iter().zip(b).enumerate() {
+                assert!(
+                    (x - y).abs() <= 1e-4 * scale,
+                    "{cfg:?} {name}[{a}]: host {x} vs burn {y}"
+                );
+            }
+        }
+    }
+}

@@ -210,8 +210,8 @@ mod tests {
             let out = q.iter().map(|v| v.max(0.0).powi(2)).sum::<f32>().sqrt();
             out + q[0].max(q[1]).max(q[2]).min(0.0)
         };
-        let shapes: [(&str, &(dyn Fn([f32; 3]) -> f32 + Sync)); 2] =
-            [("sphere", &sphere), ("slab", &slab)];
+        type Field<'a> = &'a (dyn Fn([f32; 3]) -> f32 + Sync);
+        let shapes: [(&str, Field); 2] = [("sphere", &sphere), ("slab", &slab)];
         for (name, f) in shapes {
             for r in [8, 13, 32, 64] {
                 let (spacing, coord) = grid(r);

@@ -126,6 +126,16 @@ fn gemm_acc(dst: &mut [f32], a: &[f32], b: &[f32], m: usize, k: usize, n: usize,
     }
 }
 
+/// ReLU's backward pass: zero `g` where the matching entry of `x` (the ReLU's input, or its
+/// output) is ≤ 0.
+fn relu_backward(g: &mut [f32], x: &[f32]) {
+    for (g, &x) in g.iter_mut().zip(x) {
+        if x <= 0.0 {
+            *g = 0.0;
+        }
+    }
+}
+
 /// One residual block.
 #[derive(Debug, Clone)]
 struct HostBlock {
@@ -394,25 +404,11 @@ impl HostDecoder {
             // a = (g W₁ᵀ) ⊙ [t_l > 0].
             s.a[..rows * mid].fill(0.0);
             matmul_bt_acc(&mut s.a, &s.g, &b.fc_1.w, rows, w_out, mid);
-            s.a[..rows * mid]
-                .iter_mut()
-                .zip(&s.ts[l][..rows * mid])
-                .for_each(|(a, &t)| {
-                    if t <= 0.0 {
-                        *a = 0.0
-                    }
-                });
+            relu_backward(&mut s.a[..rows * mid], &s.ts[l]);
             // g_next = (a W₀ᵀ) ⊙ [h_l > 0] + (g or g Sᵀ).
             s.g_next[..rows * w_in].fill(0.0);
             matmul_bt_acc(&mut s.g_next, &s.a, &b.fc_0.w, rows, mid, w_in);
-            s.g_next[..rows * w_in]
-                .iter_mut()
-                .zip(&s.hs[l][..rows * w_in])
-                .for_each(|(g, &h)| {
-                    if h <= 0.0 {
-                        *g = 0.0
-                    }
-                });
+            relu_backward(&mut s.g_next[..rows * w_in], &s.hs[l]);
             match &b.shortcut {
                 Some(sc) => matmul_bt_acc(&mut s.g_next, &s.g, &sc.w, rows, w_out, w_in),
                 None => s.g_next[..rows * w_in]

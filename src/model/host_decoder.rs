@@ -144,14 +144,18 @@ struct HostBlock {
     shortcut: Option<HostLinear>,
 }
 
-/// Per-thread activation buffers for one block of rows: every layer's input and hidden
-/// activation is kept (the backward pass reads them), plus gradient buffers when asked for.
+/// Per-thread activation buffers for one block of rows. With gradients every layer's input and
+/// hidden activation is kept (the backward pass reads them) and gradient buffers exist; without,
+/// one h buffer is updated in place and one t buffer reused, so the working set stays in cache.
 struct Scratch {
+    /// Whether every layer's activations are kept.
+    keep: bool,
     /// γ(q) [rows, pe_dim].
     pe: Vec<f32>,
-    /// h_0 … h_L, each [rows, width].
+    /// h_0 … h_L (kept) or the one buffer updated in place, each [rows, width]; see
+    /// [`Scratch::slot`].
     hs: Vec<Vec<f32>>,
-    /// t_l = ReLU(ReLU(h_l) W₀ + b₀) per block, [rows, width].
+    /// t_l = ReLU(ReLU(h_l) W₀ + b₀) per block (kept) or one buffer, [rows, width].
     ts: Vec<Vec<f32>>,
     /// ReLU(h_l) in the forward pass; g W₁ᵀ in the backward pass.
     a: Vec<f32>,
@@ -160,6 +164,29 @@ struct Scratch {
     g_next: Vec<f32>,
     /// Backward: ∂f/∂γ [rows, pe_dim].
     g_pe: Vec<f32>,
+}
+
+impl Scratch {
+    /// Index of h_l in `hs`.
+    fn slot(&self, l: usize) -> usize {
+        if self.keep { l } else { 0 }
+    }
+
+    /// Index of t_l in `ts`.
+    fn t_slot(&self, l: usize) -> usize {
+        if self.keep { l } else { 0 }
+    }
+}
+
+/// `(&v[i], &mut v[j])` for i ≠ j.
+fn read_write(v: &mut [Vec<f32>], i: usize, j: usize) -> (&[f32], &mut [f32]) {
+    if i < j {
+        let (lo, hi) = v.split_at_mut(j);
+        (&lo[i], &mut hi[0])
+    } else {
+        let (lo, hi) = v.split_at_mut(i);
+        (&hi[0], &mut lo[j])
+    }
 }
 
 /// Per-row values and input gradients of the decoder ([`HostDecoder::eval_with_grads`]).
@@ -295,10 +322,16 @@ impl HostDecoder {
         } else {
             (Vec::new(), Vec::new())
         };
+        let (n_h, n_t) = if grads {
+            (self.blocks.len() + 1, self.blocks.len())
+        } else {
+            (1, 1)
+        };
         Scratch {
+            keep: grads,
             pe: buf(pe_dim),
-            hs: (0..=self.blocks.len()).map(|_| buf(self.width)).collect(),
-            ts: self.blocks.iter().map(|_| buf(self.width)).collect(),
+            hs: (0..n_h).map(|_| buf(self.width)).collect(),
+            ts: (0..n_t).map(|_| buf(self.width)).collect(),
             a: buf(self.width),
             g_next: g.clone(),
             g,
@@ -306,8 +339,8 @@ impl HostDecoder {
         }
     }
 
-    /// One block of at most [`BLOCK_ROWS`] rows through the whole network, keeping every
-    /// layer's activations in `s`.
+    /// One block of at most [`BLOCK_ROWS`] rows through the whole network (every layer's
+    /// activations stay in `s` when it keeps them).
     fn forward_block(
         &self,
         q: &[[f32; 3]],
@@ -342,28 +375,36 @@ impl HostDecoder {
         self.fc_p.apply(&s.pe, &mut s.hs[0], rows, true);
         let mut width = hidden;
         for (l, b) in self.blocks.iter().enumerate() {
-            let (done, rest) = s.hs.split_at_mut(l + 1);
-            let (h, h_next) = (&done[l], &mut rest[0]);
+            let (i, k) = (s.slot(l), s.t_slot(l));
             // a = ReLU(h_l); t_l = ReLU(a W₀ + b₀).
             let n_in = rows * width;
             s.a[..n_in]
                 .iter_mut()
-                .zip(&h[..n_in])
+                .zip(&s.hs[i][..n_in])
                 .for_each(|(a, h)| *a = h.max(0.0));
-            let t = &mut s.ts[l];
+            let t = &mut s.ts[k];
             b.fc_0.apply(&s.a, t, rows, false);
             t[..rows * b.fc_0.d_out]
                 .iter_mut()
                 .for_each(|v| *v = v.max(0.0));
-            // h_{l+1} = (h_l or S h_l) + t_l W₁ + b₁.
-            match &b.shortcut {
-                Some(sc) => sc.apply(h, h_next, rows, false),
-                None => h_next[..n_in].copy_from_slice(&h[..n_in]),
+            // h_{l+1} = (h_l or S h_l) + t_l W₁ + b₁: into the next kept buffer, or in place.
+            if s.keep {
+                let (h, h_next) = read_write(&mut s.hs, l, l + 1);
+                match &b.shortcut {
+                    Some(sc) => sc.apply(h, h_next, rows, false),
+                    None => h_next[..n_in].copy_from_slice(&h[..n_in]),
+                }
+                b.fc_1.apply(&s.ts[k], h_next, rows, true);
+            } else {
+                if let Some(sc) = &b.shortcut {
+                    sc.apply(&s.hs[0], &mut s.a, rows, false);
+                    std::mem::swap(&mut s.hs[0], &mut s.a);
+                }
+                b.fc_1.apply(&s.ts[k], &mut s.hs[0], rows, true);
             }
-            b.fc_1.apply(t, h_next, rows, true);
             width = b.fc_1.d_out;
         }
-        let h = &s.hs[self.blocks.len()];
+        let h = &s.hs[s.slot(self.blocks.len())];
         let w = &self.fc_out.w;
         let bias = self.fc_out.b.as_ref().map_or(0.0, |b| b[0]);
         for (r, o) in out.iter_mut().enumerate() {

@@ -181,6 +181,13 @@ struct ShapeArgs {
     /// Use at most this many training parts.
     #[arg(long, env = "PHYSNAP_SHAPE_MAX_PARTS")]
     max_parts: Option<usize>,
+    /// How the SDF decoder's gradients are computed: `host` (hand-written backward pass on the
+    /// host, the fast default) or `burn` (burn autodiff through every layer, the reference).
+    #[arg(long, env = "PHYSNAP_SHAPE_DECODER_BACKWARD", default_value = "host", value_parser = ["host", "burn"])]
+    decoder_backward: String,
+    /// Evaluate val IoU every this many steps (0: only at the end).
+    #[arg(long, env = "PHYSNAP_SHAPE_EVAL_EVERY", default_value_t = 1000)]
+    eval_every: usize,
 }
 
 #[derive(Args, Debug)]

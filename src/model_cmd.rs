@@ -27,7 +27,7 @@ use physnap::train::codebook::{
     CODEBOOK_WEIGHTS_FILE, CodebookReport, DEFAULT_CHECK_RESOLUTION, build_codebook,
 };
 use physnap::train::diffusion::{DiffusionTrainConfig, load_data, train_diffusion};
-use physnap::train::shape::{ShapeTrainConfig, read_model_config, train_shape};
+use physnap::train::shape::{DecoderBackward, ShapeTrainConfig, read_model_config, train_shape};
 
 use super::{CodebookArgs, DiffusionArgs, EvalGuidedArgs, GenerateArgs, ShapeArgs};
 
@@ -38,6 +38,11 @@ pub fn shape(a: ShapeArgs) -> anyhow::Result<()> {
         seed: a.seed,
         batch_parts: a.batch_parts.unwrap_or(defaults.batch_parts),
         max_parts: a.max_parts,
+        eval_every: a.eval_every,
+        decoder_backward: match a.decoder_backward.as_str() {
+            "burn" => DecoderBackward::Burn,
+            _ => DecoderBackward::Host,
+        },
         ..defaults
     };
     let pb = super::progress_bar(cfg.steps, "shape");

@@ -30,6 +30,19 @@
 //!
 //! Guidance's differentiable SDF passes use these through a first-order surrogate in burn
 //! (`engine::guidance::field`), instead of recording every decoder layer on burn's autodiff tape.
+//!
+//! Training: [`HostDecoder::weight_grads`] runs the same backward pass seeded with the loss's
+//! upstream gradient u_r = ∂L/∂f_r per row (g_L = u_r · w_out ⊙ LeakyReLU'(h_L)) and also sums
+//! the weight gradients of every layer on the way:
+//!
+//! ```text
+//! ∂w_out = Σ_r u_r LeakyReLU(h_L),  ∂W₁ = Σ_r t_lᵀ g_{l+1},  ∂W₀ = Σ_r ReLU(h_l)ᵀ a_l,
+//! ∂S = Σ_r h_lᵀ g_{l+1},  ∂W_p = Σ_r γᵀ g₀,  ∂b = Σ_r (the layer's output gradient),
+//! ∂features_i = Σ_{r: idx_r = i} g₀,   a_l = (g_{l+1} W₁ᵀ) ⊙ [t_l > 0]
+//! ```
+//!
+//! The shape prior's trainer (`train::shape`) hands these to burn through a surrogate
+//! Σ W ⊙ sg(∂W) whose gradient is exactly them, so burn's tape holds the encoder only.
 
 use burn::nn::Linear;
 use rayon::prelude::*;
@@ -38,6 +51,10 @@ use super::shape_prior::ShapeDecoder;
 
 /// Rows per block: 128 rows × 128 channels × 4 B = 64 KiB per activation buffer.
 pub const BLOCK_ROWS: usize = 128;
+
+/// Blocks per gradient group of [`HostDecoder::weight_grads`]: each group sums its blocks'
+/// weight gradients into its own buffers (one allocation of all gradients per group).
+pub const GROUP_BLOCKS: usize = 8;
 
 /// A linear layer: `w` [d_in, d_out] row-major (burn's layout), `b` [d_out] or none.
 #[derive(Debug, Clone)]
@@ -82,24 +99,42 @@ impl HostLinear {
 
 /// `dst` [m, n] += `a` [m, k] · `b` [k, n], all row-major and contiguous.
 fn matmul_acc(dst: &mut [f32], a: &[f32], b: &[f32], m: usize, k: usize, n: usize) {
-    gemm_acc(dst, a, b, m, k, n, false);
+    gemm_acc(dst, a, b, m, k, n, false, false);
 }
 
 /// `dst` [m, n] += `a` [m, k] · `b`ᵀ for `b` [n, k], all row-major and contiguous.
 fn matmul_bt_acc(dst: &mut [f32], a: &[f32], b: &[f32], m: usize, k: usize, n: usize) {
-    gemm_acc(dst, a, b, m, k, n, true);
+    gemm_acc(dst, a, b, m, k, n, false, true);
 }
 
-/// `dst` [m, n] += `a` [m, k] · B, B = `b` [k, n] or, transposed, `b`ᵀ with `b` [n, k].
-fn gemm_acc(dst: &mut [f32], a: &[f32], b: &[f32], m: usize, k: usize, n: usize, bt: bool) {
+/// `dst` [m, n] += `a`ᵀ · `b` for `a` [k, m] and `b` [k, n], all row-major and contiguous (a
+/// weight gradient: layer inputs [rows, d_in]ᵀ · output gradients [rows, d_out]).
+fn matmul_at_acc(dst: &mut [f32], a: &[f32], b: &[f32], m: usize, k: usize, n: usize) {
+    gemm_acc(dst, a, b, m, k, n, true, false);
+}
+
+/// `dst` [m, n] += A · B, A = `a` [m, k] or, transposed, `a`ᵀ with `a` [k, m]; B = `b` [k, n]
+/// or, transposed, `b`ᵀ with `b` [n, k].
+#[allow(clippy::too_many_arguments)]
+fn gemm_acc(
+    dst: &mut [f32],
+    a: &[f32],
+    b: &[f32],
+    m: usize,
+    k: usize,
+    n: usize,
+    at: bool,
+    bt: bool,
+) {
     assert!(dst.len() >= m * n && a.len() >= m * k && b.len() >= k * n);
-    // (column stride, row stride) of B inside `b`.
+    // (column stride, row stride) of A inside `a` and of B inside `b`.
+    let (a_cs, a_rs) = if at { (m as isize, 1) } else { (1, k as isize) };
     let (b_cs, b_rs) = if bt { (k as isize, 1) } else { (1, n as isize) };
     if m == 0 || n == 0 || k == 0 {
         return;
     }
     // SAFETY: the three buffers hold at least m·n, m·k and k·n elements (asserted above), the
-    // strides describe contiguous row-major matrices (B possibly read transposed) inside them,
+    // strides describe contiguous row-major matrices (A or B possibly read transposed) inside them,
     // and `dst` is a unique borrow that does not alias `a` or `b`.
     unsafe {
         gemm::gemm(
@@ -111,8 +146,8 @@ fn gemm_acc(dst: &mut [f32], a: &[f32], b: &[f32], m: usize, k: usize, n: usize,
             n as isize,
             true,
             a.as_ptr(),
-            1,
-            k as isize,
+            a_cs,
+            a_rs,
             b.as_ptr(),
             b_cs,
             b_rs,
@@ -199,6 +234,57 @@ pub struct InputGrads {
     /// ∂f/∂h₀ per row, [Q × hidden] flat: the gradient with respect to the row's code features
     /// (z W_c + b_c).
     pub d_features: Vec<f32>,
+}
+
+/// Gradient of a loss with respect to one linear layer: `w` [d_in × d_out] flat (the layer's
+/// layout), `b` [d_out] when the layer has a bias.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinearGrad {
+    /// ∂L/∂W.
+    pub w: Vec<f32>,
+    /// ∂L/∂b.
+    pub b: Option<Vec<f32>>,
+}
+
+impl LinearGrad {
+    fn zeros(l: &HostLinear) -> Self {
+        LinearGrad {
+            w: vec![0.0; l.w.len()],
+            b: l.b.as_ref().map(|b| vec![0.0; b.len()]),
+        }
+    }
+
+    fn add(&mut self, other: &LinearGrad) {
+        add_into(&mut self.w, &other.w);
+        if let (Some(a), Some(b)) = (&mut self.b, &other.b) {
+            add_into(a, b);
+        }
+    }
+}
+
+fn add_into(dst: &mut [f32], src: &[f32]) {
+    dst.iter_mut().zip(src).for_each(|(d, s)| *d += s);
+}
+
+/// `dst` [n] += Σ_r `g`[r, ·] over the rows of `g` [rows, n] (a bias gradient).
+fn col_sums_acc(dst: &mut [f32], g: &[f32], rows: usize) {
+    let n = dst.len();
+    for row in g[..rows * n].chunks_exact(n) {
+        add_into(dst, row);
+    }
+}
+
+/// Values and weight gradients of a loss L for upstream gradients u_r = ∂L/∂f_r
+/// ([`HostDecoder::weight_grads`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct WeightGrads {
+    /// f per row, [Q].
+    pub values: Vec<f32>,
+    /// ∂L/∂(code features) per part, [P × hidden] flat: W_c's and b_c's gradients (and the
+    /// code's) follow from it by the chain rule through z W_c + b_c.
+    pub d_features: Vec<f32>,
+    /// ∂L/∂ of every other layer, in the order of [`HostDecoder::layer_order`].
+    pub layers: Vec<LinearGrad>,
 }
 
 /// The decoder's weights on the host (see the module docs).
@@ -312,6 +398,177 @@ impl HostDecoder {
                 },
             );
         g
+    }
+
+    /// The linear layers [`WeightGrads::layers`] holds, in its order (burn's field names):
+    /// `fc_p`, then per residual block `fc_0`, `fc_1` and `shortcut` when the block has one,
+    /// then `fc_out`. `fc_c` is not among them (see [`WeightGrads::d_features`]).
+    pub fn layer_order(&self) -> Vec<String> {
+        let mut names = vec!["fc_p".to_string()];
+        for (l, b) in self.blocks.iter().enumerate() {
+            names.push(format!("blocks.{l}.fc_0"));
+            names.push(format!("blocks.{l}.fc_1"));
+            if b.shortcut.is_some() {
+                names.push(format!("blocks.{l}.shortcut"));
+            }
+        }
+        names.push("fc_out".to_string());
+        names
+    }
+
+    fn layers(&self) -> Vec<&HostLinear> {
+        let mut out = vec![&self.fc_p];
+        for b in &self.blocks {
+            out.push(&b.fc_0);
+            out.push(&b.fc_1);
+            out.extend(b.shortcut.as_ref());
+        }
+        out.push(&self.fc_out);
+        out
+    }
+
+    /// The training pass: values f_r and the gradients of a loss L with ∂L/∂f_r =
+    /// `upstream(r, f_r)` with respect to every weight and to the code features (module docs,
+    /// "Training"), for `features` [P × hidden] with P = `features.len() / hidden`. `upstream`
+    /// sees each row's value as soon as the forward pass has it, so one pass does both.
+    ///
+    /// Rows run in fixed groups of [`GROUP_BLOCKS`] blocks on the current rayon pool, and the
+    /// groups' gradients are summed in group order, so the result does not depend on the
+    /// thread count or on scheduling.
+    ///
+    /// # Panics
+    /// When `idx`, `q` and `upstream` differ in length or an index is past the features.
+    pub fn weight_grads(
+        &self,
+        q: &[[f32; 3]],
+        features: &[f32],
+        idx: &[usize],
+        upstream: &(dyn Fn(usize, f32) -> f32 + Sync),
+    ) -> WeightGrads {
+        self.check_inputs(q, features, idx);
+        let hidden = self.hidden();
+        let group_rows = GROUP_BLOCKS * BLOCK_ROWS;
+        let zeros = || WeightGrads {
+            values: Vec::new(),
+            d_features: vec![0.0; features.len() / hidden * hidden],
+            layers: self.layers().into_iter().map(LinearGrad::zeros).collect(),
+        };
+        let groups: Vec<WeightGrads> = q
+            .par_chunks(group_rows)
+            .zip(idx.par_chunks(group_rows))
+            .enumerate()
+            .map(|(gi, (q, idx))| {
+                let mut acc = zeros();
+                let mut values = vec![0.0; q.len()];
+                let mut up = vec![0.0; BLOCK_ROWS];
+                let mut s = self.scratch(true);
+                for (bi, ((q, idx), out)) in q
+                    .chunks(BLOCK_ROWS)
+                    .zip(idx.chunks(BLOCK_ROWS))
+                    .zip(values.chunks_mut(BLOCK_ROWS))
+                    .enumerate()
+                {
+                    self.forward_block(q, features, idx, out, &mut s);
+                    let first = gi * group_rows + bi * BLOCK_ROWS;
+                    for (r, (u, &f)) in up.iter_mut().zip(out.iter()).enumerate() {
+                        *u = upstream(first + r, f);
+                    }
+                    self.backward_weights(idx, &up[..q.len()], &mut s, &mut acc);
+                }
+                acc.values = values;
+                acc
+            })
+            .collect();
+        let mut total = zeros();
+        total.values.reserve(q.len());
+        for g in &groups {
+            total.values.extend_from_slice(&g.values);
+            add_into(&mut total.d_features, &g.d_features);
+            for (t, l) in total.layers.iter_mut().zip(&g.layers) {
+                t.add(l);
+            }
+        }
+        total
+    }
+
+    /// The backward pass of the block just run by [`HostDecoder::forward_block`], seeded with
+    /// `up` (∂L/∂f per row): accumulates the weight gradients and ∂L/∂features into `acc`.
+    fn backward_weights(&self, idx: &[usize], up: &[f32], s: &mut Scratch, acc: &mut WeightGrads) {
+        let rows = idx.len();
+        let n_blocks = self.blocks.len();
+        let last = self.blocks.last().map_or(self.hidden(), |b| b.fc_1.d_out);
+        let mut layer = acc.layers.len() - 1;
+        // f = LeakyReLU(h_L) w_out + b_out: ∂w_out = Σ_r u_r LeakyReLU(h_L,r), ∂b_out = Σ_r u_r,
+        // g_L = u_r w_out ⊙ LeakyReLU'(h_L).
+        let w = &self.fc_out.w;
+        let out = &mut acc.layers[layer];
+        for ((g, h), &u) in s.g[..rows * last]
+            .chunks_exact_mut(last)
+            .zip(s.hs[n_blocks].chunks_exact(last))
+            .zip(up)
+        {
+            for (((g, &h), &w), dw) in g.iter_mut().zip(h).zip(w).zip(out.w.iter_mut()) {
+                let (act, slope) = if h >= 0.0 { (h, 1.0) } else { (0.2 * h, 0.2) };
+                *dw += u * act;
+                *g = u * slope * w;
+            }
+            if let Some(db) = &mut out.b {
+                db[0] += u;
+            }
+        }
+        for (l, b) in self.blocks.iter().enumerate().rev() {
+            let (w_in, mid, w_out) = (b.fc_0.d_in, b.fc_0.d_out, b.fc_1.d_out);
+            if b.shortcut.is_some() {
+                // ∂S = h_lᵀ g.
+                let sc = &mut acc.layers[layer - 1];
+                matmul_at_acc(&mut sc.w, &s.hs[l], &s.g, w_in, rows, w_out);
+                layer -= 1;
+            }
+            // ∂W₁ = t_lᵀ g, ∂b₁ = Σ_r g.
+            let fc_1 = &mut acc.layers[layer - 1];
+            matmul_at_acc(&mut fc_1.w, &s.ts[l], &s.g, mid, rows, w_out);
+            if let Some(db) = &mut fc_1.b {
+                col_sums_acc(db, &s.g, rows);
+            }
+            // a = (g W₁ᵀ) ⊙ [t_l > 0]; ∂W₀ = ReLU(h_l)ᵀ a, ∂b₀ = Σ_r a.
+            s.a[..rows * mid].fill(0.0);
+            matmul_bt_acc(&mut s.a, &s.g, &b.fc_1.w, rows, w_out, mid);
+            relu_backward(&mut s.a[..rows * mid], &s.ts[l]);
+            s.g_next[..rows * w_in]
+                .iter_mut()
+                .zip(&s.hs[l][..rows * w_in])
+                .for_each(|(r, &h)| *r = h.max(0.0));
+            let fc_0 = &mut acc.layers[layer - 2];
+            matmul_at_acc(&mut fc_0.w, &s.g_next, &s.a, w_in, rows, mid);
+            if let Some(db) = &mut fc_0.b {
+                col_sums_acc(db, &s.a, rows);
+            }
+            layer -= 2;
+            // g_next = (a W₀ᵀ) ⊙ [h_l > 0] + (g or g Sᵀ).
+            s.g_next[..rows * w_in].fill(0.0);
+            matmul_bt_acc(&mut s.g_next, &s.a, &b.fc_0.w, rows, mid, w_in);
+            relu_backward(&mut s.g_next[..rows * w_in], &s.hs[l]);
+            match &b.shortcut {
+                Some(sc) => matmul_bt_acc(&mut s.g_next, &s.g, &sc.w, rows, w_out, w_in),
+                None => add_into(&mut s.g_next[..rows * w_in], &s.g[..rows * w_in]),
+            }
+            std::mem::swap(&mut s.g, &mut s.g_next);
+        }
+        debug_assert_eq!(layer, 1, "every layer but fc_p visited");
+        // h₀ = features[idx] + γ W_p + b_p: ∂W_p = γᵀ g₀, ∂b_p = Σ_r g₀, ∂features[i] = Σ_{idx=i} g₀.
+        let hidden = self.hidden();
+        let pe_dim = self.fc_p.d_in;
+        let fc_p = &mut acc.layers[0];
+        matmul_at_acc(&mut fc_p.w, &s.pe, &s.g, pe_dim, rows, hidden);
+        if let Some(db) = &mut fc_p.b {
+            col_sums_acc(db, &s.g, rows);
+        }
+        for (r, &i) in idx.iter().enumerate() {
+            add_into(
+                &mut acc.d_features[i * hidden..(i + 1) * hidden],
+                &s.g[r * hidden..(r + 1) * hidden],
+            );
+        }
     }
 
     fn scratch(&self, grads: bool) -> Scratch {

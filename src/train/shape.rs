@@ -27,6 +27,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use burn::module::Module;
+use burn::nn::Linear;
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::store::{ModuleSnapshot, SafetensorsStore};
 use burn::tensor::{Device, Tensor, TensorData};
@@ -38,7 +39,8 @@ use crate::data::rng::Rng;
 use crate::io::npy;
 use crate::mesh::DOMAIN_HALF;
 use crate::mesh::bvh::MeshBvh;
-use crate::model::shape_prior::{ShapePrior, ShapePriorConfig};
+use crate::model::host_decoder::HostDecoder;
+use crate::model::shape_prior::{ShapeDecoder, ShapePrior, ShapePriorConfig};
 use crate::model::{cpu, cpu_autodiff};
 use crate::shape::{AnalyticSdf, PartShape, Sdf};
 
@@ -93,6 +95,30 @@ pub struct ShapeTrainConfig {
     pub max_parts: Option<usize>,
     /// Own rayon pool with this many threads (None: the current pool).
     pub threads: Option<usize>,
+    /// How the decoder's gradients are computed.
+    pub decoder_backward: DecoderBackward,
+}
+
+/// How a training step computes the SDF decoder's gradients. Both give the same gradients up
+/// to float summation order (tested); the host pass is the fast one.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum DecoderBackward {
+    /// The hand-written forward/backward on the host ([`HostDecoder::weight_grads`]), handed to
+    /// burn through a surrogate: burn's autodiff tape holds only the encoder and W_c.
+    #[default]
+    Host,
+    /// burn's autodiff through every decoder layer (the reference implementation).
+    Burn,
+}
+
+impl DecoderBackward {
+    /// The name used in reports and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            DecoderBackward::Host => "host",
+            DecoderBackward::Burn => "burn",
+        }
+    }
 }
 
 impl Default for ShapeTrainConfig {
@@ -113,6 +139,7 @@ impl Default for ShapeTrainConfig {
             iou_resolution: 64,
             max_parts: None,
             threads: None,
+            decoder_backward: DecoderBackward::Host,
         }
     }
 }
@@ -194,6 +221,7 @@ impl ShapeTrainConfig {
             "iou_resolution": self.iou_resolution,
             "max_parts": self.max_parts,
             "threads": self.threads,
+            "decoder_backward": self.decoder_backward.name(),
         })
     }
 }
@@ -477,13 +505,23 @@ fn load_val_part(
 }
 
 /// One training batch on `device`: (query points [B, Q, 3], targets [B, Q], surface [B, S, 3]).
+/// One step's training batch on the host: B parts × Q queries (xyz, target SDF) and B × S
+/// encoder points.
+struct Batch {
+    /// [B × Q × 3].
+    pts: Vec<f32>,
+    /// [B × Q].
+    tgt: Vec<f32>,
+    /// [B × S × 3].
+    surf: Vec<f32>,
+}
+
 fn sample_batch(
     parts: &[PartSamples],
     order: &[usize],
     cfg: &ShapeTrainConfig,
     rng: &mut Rng,
-    device: &Device,
-) -> (Tensor<3>, Tensor<2>, Tensor<3>) {
+) -> Batch {
     let (b, q, s) = (order.len(), cfg.queries_per_part, cfg.surface_points);
     let mut pts = Vec::with_capacity(b * q * 3);
     let mut tgt = Vec::with_capacity(b * q);
@@ -518,11 +556,7 @@ fn sample_batch(
             }
         }
     }
-    (
-        Tensor::from_data(TensorData::new(pts, [b, q, 3]), device),
-        Tensor::from_data(TensorData::new(tgt, [b, q]), device),
-        Tensor::from_data(TensorData::new(surf, [b, s, 3]), device),
-    )
+    Batch { pts, tgt, surf }
 }
 
 fn to_vec<const D: usize>(t: Tensor<D>) -> Vec<f32> {
@@ -560,24 +594,22 @@ fn evaluate(
         .map(|(a, b)| (a - b).abs() as f64)
         .sum::<f64>()
         / (v * q) as f64;
-    const CHUNK: usize = 1 << 16;
-    let n = grid.len() / 3;
+    // The grid decodes run on the value-only host decoder (same function, 3-4× faster).
+    let host = HostDecoder::new(&model.decoder);
+    let features = to_vec(features);
+    let grid: Vec<[f32; 3]> = grid.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
+    let n = grid.len();
+    let mut d = vec![0.0; n];
+    let mut idx = vec![0; n];
     let mut ious = Vec::with_capacity(v);
     for (i, part) in val.iter().enumerate() {
-        let f = features.clone().narrow(0, i, 1);
         let (mut inter, mut union) = (0usize, 0usize);
-        for start in (0..n).step_by(CHUNK) {
-            let len = CHUNK.min(n - start);
-            let pts = grid[3 * start..3 * (start + len)].to_vec();
-            let d = to_vec(model.decoder.sdf_with_features(
-                Tensor::from_data(TensorData::new(pts, [1, len, 3]), &device),
-                f.clone(),
-            ));
-            for (dv, &gt) in d.iter().zip(&part.occupancy[start..start + len]) {
-                let occ = *dv < 0.0;
-                inter += (occ && gt) as usize;
-                union += (occ || gt) as usize;
-            }
+        idx.fill(i);
+        host.eval(&grid, &features, &idx, &mut d);
+        for (dv, &gt) in d.iter().zip(&part.occupancy) {
+            let occ = *dv < 0.0;
+            inter += (occ && gt) as usize;
+            union += (occ || gt) as usize;
         }
         ious.push(if union == 0 {
             1.0
@@ -795,6 +827,121 @@ fn truncated_residual(pred: Tensor<2>, target: Tensor<2>, delta: f32) -> Tensor<
     pred - target.clamp(-delta, delta)
 }
 
+/// ∂|r|/∂pred of one query's (possibly truncated) residual, as [`truncated_residual`] and
+/// burn's `abs` differentiate it: 0 where the truncation clamps the prediction, else sign(r)
+/// (0 at r = 0).
+fn l1_upstream(pred: f32, target: f32, truncation: Option<f32>) -> (f32, f32) {
+    let (pred, target, clamped) = match truncation {
+        Some(d) if target >= d && pred > d => (d, d, true),
+        Some(d) if target <= -d && pred < -d => (-d, -d, true),
+        Some(d) => (pred, target.clamp(-d, d), false),
+        None => (pred, target, false),
+    };
+    let r = pred - target;
+    let sign = if clamped || r == 0.0 { 0.0 } else { r.signum() };
+    (r.abs(), sign)
+}
+
+/// The linear layers of `decoder` in [`HostDecoder::layer_order`]'s order.
+fn decoder_linears(decoder: &ShapeDecoder) -> Vec<&Linear> {
+    let mut out = vec![&decoder.fc_p];
+    for b in &decoder.blocks {
+        out.push(&b.fc_0);
+        out.push(&b.fc_1);
+        out.extend(b.shortcut.as_ref());
+    }
+    out.push(&decoder.fc_out);
+    out
+}
+
+/// The decoder half of a training step with [`DecoderBackward::Host`]: the host pass computes
+/// the L1 term's value and its gradients ([`HostDecoder::weight_grads`]), and burn gets
+///
+/// ```text
+/// S = Σ_layers (Σ W ⊙ sg(∂W) + Σ b ⊙ sg(∂b)) + Σ (z W_c + b_c) ⊙ sg(∂features)
+/// ```
+///
+/// whose gradient with respect to every decoder weight, W_c, b_c and (through z) the encoder
+/// is the L1 term's. Returns (S, the L1 term's value).
+fn host_decoder_surrogate(
+    decoder: &ShapeDecoder,
+    z: Tensor<2>,
+    pts: &[f32],
+    tgt: &[f32],
+    queries_per_part: usize,
+    cfg: &ShapeTrainConfig,
+) -> (Tensor<1>, f64) {
+    let device = z.device();
+    let features = decoder.code_features(z);
+    let host = HostDecoder::new(decoder);
+    let hidden = host.hidden();
+    let feature_values = to_vec(features.clone().detach());
+    let q: Vec<[f32; 3]> = pts.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
+    let idx: Vec<usize> = (0..q.len()).map(|r| r / queries_per_part).collect();
+    let n = q.len() as f32;
+    let g = host.weight_grads(&q, &feature_values, &idx, &|r, f| {
+        l1_upstream(f, tgt[r], cfg.truncation).1 / n
+    });
+    let l1 = g
+        .values
+        .iter()
+        .zip(tgt)
+        .map(|(&f, &t)| l1_upstream(f, t, cfg.truncation).0 as f64)
+        .sum::<f64>()
+        / q.len().max(1) as f64;
+    let p = feature_values.len() / hidden;
+    let d_features = Tensor::<2>::from_data(TensorData::new(g.d_features, [p, hidden]), &device);
+    let mut surrogate = (features * d_features).sum();
+    for (layer, grad) in decoder_linears(decoder).into_iter().zip(g.layers) {
+        let w = layer.weight.val();
+        let dw = Tensor::<2>::from_data(TensorData::new(grad.w, w.dims()), &device);
+        surrogate = surrogate + (w * dw).sum();
+        if let (Some(b), Some(db)) = (&layer.bias, grad.b) {
+            let len = db.len();
+            let db = Tensor::<1>::from_data(TensorData::new(db, [len]), &device);
+            surrogate = surrogate + (b.val() * db).sum();
+        }
+    }
+    (surrogate, l1)
+}
+
+/// A step's loss L = mean |f̂ − f| + w_reg · mean(z²) on `batch`: (a tensor whose gradient
+/// is ∂L, L's value). With [`DecoderBackward::Burn`] the tensor is L itself; with
+/// [`DecoderBackward::Host`] it is the surrogate of [`host_decoder_surrogate`] plus the
+/// regulariser.
+fn batch_loss(
+    model: &ShapePrior,
+    batch: Batch,
+    cfg: &ShapeTrainConfig,
+    device: &Device,
+) -> (Tensor<1>, f64) {
+    let (q, s) = (cfg.queries_per_part, cfg.surface_points);
+    let b = batch.tgt.len() / q;
+    let surf = Tensor::from_data(TensorData::new(batch.surf, [b, s, 3]), device);
+    let z = model.encoder.encode(surf);
+    let reg = z.clone().square().mean().mul_scalar(cfg.w_reg);
+    match cfg.decoder_backward {
+        DecoderBackward::Burn => {
+            let pts = Tensor::from_data(TensorData::new(batch.pts, [b, q, 3]), device);
+            let tgt = Tensor::from_data(TensorData::new(batch.tgt, [b, q]), device);
+            let pred = model.decoder.sdf(pts, z);
+            let diff = match cfg.truncation {
+                Some(d) => truncated_residual(pred, tgt, d),
+                None => pred - tgt,
+            };
+            let loss = diff.abs().mean() + reg;
+            let value = loss.clone().into_scalar::<f32>() as f64;
+            (loss, value)
+        }
+        DecoderBackward::Host => {
+            let (surrogate, l1) =
+                host_decoder_surrogate(&model.decoder, z, &batch.pts, &batch.tgt, q, cfg);
+            let value = l1 + reg.clone().into_scalar::<f32>() as f64;
+            (surrogate + reg, value)
+        }
+    }
+}
+
 /// The optimisation state of a run: model, Adam, batch sampler.
 struct Trainer<'a> {
     cfg: &'a ShapeTrainConfig,
@@ -836,16 +983,9 @@ impl<'a> Trainer<'a> {
             }
             order.extend(self.epoch.pop());
         }
-        let (pts, tgt, surf) = sample_batch(self.parts, &order, cfg, &mut self.rng, &self.device);
+        let batch = sample_batch(self.parts, &order, cfg, &mut self.rng);
         let model = self.model.take().expect("model is present between steps");
-        let z = model.encoder.encode(surf);
-        let pred = model.decoder.sdf(pts, z.clone());
-        let diff = match cfg.truncation {
-            Some(d) => truncated_residual(pred, tgt, d),
-            None => pred - tgt,
-        };
-        let loss = diff.abs().mean() + z.square().mean().mul_scalar(cfg.w_reg);
-        let value = loss.clone().into_scalar::<f32>() as f64;
+        let (loss, value) = batch_loss(&model, batch, cfg, &self.device);
         if !value.is_finite() || value > DIVERGED_LOSS {
             return Err(TrainError::Diverged { step, loss: value });
         }
@@ -1241,6 +1381,133 @@ mod tests {
         }
     }
 
+    /// The host decoder pass ([`DecoderBackward::Host`]) gives burn autodiff's loss value and
+    /// gradients for every parameter — decoder layers, W_c, and the encoder through the codes —
+    /// with and without truncation, with and without positional encoding and residual blocks.
+    #[test]
+    fn host_decoder_backward_equals_burn_autodiff() {
+        struct Randomise(Rng);
+        impl burn::module::ModuleMapper for Randomise {
+            fn map_float<const D: usize>(
+                &mut self,
+                param: burn::module::Param<Tensor<D>>,
+            ) -> burn::module::Param<Tensor<D>> {
+                param.map(|t| {
+                    let shape = t.shape();
+                    let n = shape.num_elements();
+                    let v: Vec<f32> = (0..n).map(|_| self.0.range(-0.3, 0.3) as f32).collect();
+                    Tensor::from_data(TensorData::new(v, shape), &t.device()).require_grad()
+                })
+            }
+        }
+        for (seed, pe_freqs, blocks, truncation) in
+            [(1, 4, 2, None), (2, 0, 1, Some(0.05)), (3, 6, 0, None)]
+        {
+            let cfg = ShapeTrainConfig {
+                model: ShapePriorConfig {
+                    latent: 12,
+                    decoder_hidden: 24,
+                    decoder_blocks: blocks,
+                    encoder_hidden: 8,
+                    encoder_blocks: 2,
+                    pe_freqs,
+                },
+                queries_per_part: 350, // 3 × 350 rows: several 128-row blocks and a partial one
+                surface_points: 40,
+                truncation,
+                w_reg: 0.01,
+                ..ShapeTrainConfig::default()
+            };
+            let device = cpu_autodiff();
+            let model = ShapePrior::with_seed(&cfg.model, seed, &device)
+                .map(&mut Randomise(Rng::new(seed)));
+            let mut rng = Rng::new(seed + 10);
+            let mut draw = |n: usize, lo: f64, hi: f64| -> Vec<f32> {
+                (0..n).map(|_| rng.range(lo, hi) as f32).collect()
+            };
+            let b = 3;
+            let (pts, tgt, surf) = (
+                draw(b * cfg.queries_per_part * 3, -0.55, 0.55),
+                draw(b * cfg.queries_per_part, -0.2, 0.2),
+                draw(b * cfg.surface_points * 3, -0.5, 0.5),
+            );
+            let run = |backward: DecoderBackward| {
+                let cfg = ShapeTrainConfig {
+                    decoder_backward: backward,
+                    ..cfg.clone()
+                };
+                let batch = Batch {
+                    pts: pts.clone(),
+                    tgt: tgt.clone(),
+                    surf: surf.clone(),
+                };
+                let (loss, value) = batch_loss(&model, batch, &cfg, &device);
+                let grads = loss.backward();
+                macro_rules! grad {
+                    ($t:expr) => {
+                        $t.grad(&grads)
+                            .expect("every parameter has a gradient")
+                            .into_data()
+                            .try_to_vec::<f32>()
+                            .unwrap()
+                    };
+                }
+                let mut params: Vec<(String, Vec<f32>)> = Vec::new();
+                for (k, l) in decoder_linears(&model.decoder).into_iter().enumerate() {
+                    params.push((format!("decoder layer {k} W"), grad!(l.weight.val())));
+                    if let Some(bias) = &l.bias {
+                        params.push((format!("decoder layer {k} b"), grad!(bias.val())));
+                    }
+                }
+                let (dec, enc) = (&model.decoder, &model.encoder);
+                params.push(("decoder fc_c W".into(), grad!(dec.fc_c.weight.val())));
+                params.push(("encoder fc_pos W".into(), grad!(enc.fc_pos.weight.val())));
+                params.push(("encoder fc_c W".into(), grad!(enc.fc_c.weight.val())));
+                (value, params)
+            };
+            let (host_value, host) = run(DecoderBackward::Host);
+            let (burn_value, burn) = run(DecoderBackward::Burn);
+            assert!(
+                (host_value - burn_value).abs() <= 1e-5 * burn_value.abs().max(1.0),
+                "loss: host {host_value} vs burn {burn_value}"
+            );
+            assert_eq!(host.len(), burn.len());
+            for ((name, h), (_, w)) in host.iter().zip(&burn) {
+                let scale = w.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+                assert!(scale > 0.0, "{name}: burn's gradient is all zero");
+                for (i, (x, y)) in h.iter().zip(w).enumerate() {
+                    assert!(
+                        (x - y).abs() <= 1e-4 * scale,
+                        "seed {seed} {name}[{i}]: host {x} vs burn {y} (scale {scale})"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn l1_upstream_follows_the_truncated_residual() {
+        // (pred, target) as in truncated_residual_keeps_wrong_side_gradients, δ = 0.1: beyond
+        // the band on the target's side is free, the wrong side keeps its gradient.
+        let cases = [
+            (0.3, 0.5, (0.0, 0.0)),
+            (-0.2, 0.5, (0.3, -1.0)),
+            (0.05, 0.02, (0.03, 1.0)),
+            (0.4, -0.3, (0.5, 1.0)),
+            (-0.4, -0.3, (0.0, 0.0)),
+        ];
+        for (pred, target, (abs, sign)) in cases {
+            let (a, s) = l1_upstream(pred, target, Some(0.1));
+            assert!(
+                (a - abs).abs() < 1e-6 && s == sign,
+                "{pred} {target}: {a} {s}"
+            );
+        }
+        let (a, s) = l1_upstream(0.3, 0.5, None);
+        assert!((a - 0.2).abs() < 1e-6 && s == -1.0, "{a} {s}");
+        assert_eq!(l1_upstream(0.5, 0.5, None), (0.0, 0.0));
+    }
+
     #[test]
     fn cosine_schedule_ends_at_the_final_factor() {
         let cfg = ShapeTrainConfig {
@@ -1285,16 +1552,18 @@ mod tests {
                 }
             })
             .collect();
-        for (batch_parts, queries_per_part, surface_points) in [
-            (16, 2048, 512),
-            (32, 1024, 512),
-            (16, 2048, 1024),
-            (8, 4096, 512),
+        for (batch_parts, queries_per_part, surface_points, backward) in [
+            (16, 2048, 512, DecoderBackward::Burn),
+            (16, 2048, 512, DecoderBackward::Host),
+            (32, 1024, 512, DecoderBackward::Host),
+            (16, 2048, 256, DecoderBackward::Host),
+            (32, 2048, 256, DecoderBackward::Host),
         ] {
             let cfg = ShapeTrainConfig {
                 batch_parts,
                 queries_per_part,
                 surface_points,
+                decoder_backward: backward,
                 ..ShapeTrainConfig::default()
             };
             let mut trainer = Trainer::new(&cfg, &parts);
@@ -1306,7 +1575,8 @@ mod tests {
             }
             let dt = t0.elapsed().as_secs_f64() / n as f64;
             println!(
-                "train step (default model) B={batch_parts} Q={queries_per_part} S={surface_points}: {:.2} steps/s, {:.0} queries/s, {:.0} ms/step, threads {}",
+                "train step (default model, {} backward) B={batch_parts} Q={queries_per_part} S={surface_points}: {:.2} steps/s, {:.0} queries/s, {:.0} ms/step, threads {}",
+                backward.name(),
                 1.0 / dt,
                 (batch_parts * queries_per_part) as f64 / dt,
                 dt * 1e3,

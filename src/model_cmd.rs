@@ -49,7 +49,18 @@ pub fn shape(a: ShapeArgs) -> anyhow::Result<()> {
     let report = train_shape(&a.data, &cfg, &a.out, &mut |p| {
         pb.set_position(p.step as u64);
         match p.val_iou {
-            Some(iou) => pb.set_prefix(format!("loss {:.4} val IoU {iou:.3}", p.loss)),
+            Some(iou) => {
+                pb.set_prefix(format!("loss {:.4} val IoU {iou:.3}", p.loss));
+                // Also in the log, where a hidden bar (no TTY) shows no prefix.
+                tracing::info!(
+                    "shape: step {} val IoU {iou:.4}, val L1 {:.5}, loss {:.5}, lr {:.2e}, {:.0} s",
+                    p.step,
+                    p.val_l1.unwrap_or(f64::NAN),
+                    p.loss,
+                    p.lr,
+                    p.elapsed_s
+                );
+            }
             None => pb.set_prefix(format!("loss {:.4}", p.loss)),
         }
     })?;

@@ -188,6 +188,16 @@ struct ShapeArgs {
     /// Evaluate val IoU every this many steps (0: only at the end).
     #[arg(long, env = "PHYSNAP_SHAPE_EVAL_EVERY", default_value_t = 1000)]
     eval_every: usize,
+    /// Steps between checkpoints (weights + shape_checkpoint.json in --out; 0: none).
+    #[arg(long, env = "PHYSNAP_CHECKPOINT_EVERY", default_value_t = 1000)]
+    checkpoint_every: usize,
+    /// Continue from the checkpoint in --out (same data and training options).
+    #[arg(long, env = "PHYSNAP_RESUME")]
+    resume: bool,
+    /// End this run after this many steps in total, with a checkpoint (the learning-rate
+    /// schedule still spans --steps; continue with --resume).
+    #[arg(long, env = "PHYSNAP_SHAPE_STOP_AT")]
+    stop_at: Option<usize>,
 }
 
 #[derive(Args, Debug)]

@@ -39,6 +39,9 @@ pub fn shape(a: ShapeArgs) -> anyhow::Result<()> {
         batch_parts: a.batch_parts.unwrap_or(defaults.batch_parts),
         max_parts: a.max_parts,
         eval_every: a.eval_every,
+        checkpoint_every: a.checkpoint_every,
+        resume: a.resume,
+        stop_at: a.stop_at,
         decoder_backward: match a.decoder_backward.as_str() {
             "burn" => DecoderBackward::Burn,
             _ => DecoderBackward::Host,
@@ -65,6 +68,15 @@ pub fn shape(a: ShapeArgs) -> anyhow::Result<()> {
         }
     })?;
     pb.finish_and_clear();
+    if report.steps < cfg.steps {
+        println!(
+            "stopped the shape prior at step {} of {} with a checkpoint in {} (continue with --resume)",
+            report.steps,
+            cfg.steps,
+            a.out.display()
+        );
+        return Ok(());
+    }
     println!(
         "trained the shape prior for {} steps in {:.0} s: loss {:.4} -> {:.4}, val IoU {}",
         report.steps,

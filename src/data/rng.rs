@@ -26,6 +26,16 @@ impl Rng {
         r
     }
 
+    /// The whole generator state (for checkpoints): [`Rng::from_state`] continues the stream.
+    pub fn state(&self) -> u64 {
+        self.state
+    }
+
+    /// A generator that continues the stream whose [`Rng::state`] was `state`.
+    pub fn from_state(state: u64) -> Self {
+        Rng { state }
+    }
+
     /// Next 64 random bits.
     pub fn next_u64(&mut self) -> u64 {
         self.state = self.state.wrapping_add(0x9E37_79B9_7F4A_7C15);

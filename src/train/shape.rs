@@ -18,7 +18,17 @@
 //!   `iou_resolution`³ grid of cell centres over [−0.55, 0.55]³, codes encoded from each val
 //!   part's first `surface_points` surface points (the codebook's deterministic path);
 //! - writes `shape_prior.safetensors`, `codebook.npy` + `codebook.json` (every part of every
-//!   split, dataset order) and `shape_train.json` into `out`.
+//!   split, dataset order) and `shape_train.json` into `out`;
+//! - every `checkpoint_every` steps (and at `stop_at`) writes the weights and
+//!   `shape_checkpoint.json` (step, generator state, the rest of the shuffled epoch, losses,
+//!   evaluations, weights sha256); `resume` continues the same batch stream from there. Adam's
+//!   moments restart at a resume (as in `train diffusion`), so a resumed run is close to, not
+//!   bit-identical with, an uninterrupted one.
+//!
+//! The decoder's gradients come from the host pass `HostDecoder::weight_grads` (hand-written
+//! backward, fixed summation order) through a surrogate (see [`DecoderBackward`]);
+//! `DecoderBackward::Burn` is burn autodiff through every layer, the reference the tests
+//! compare with.
 //!
 //! Deterministic for a seed at a fixed thread count: weights come from our seeded init, batches
 //! from [`Rng`].
@@ -56,6 +66,26 @@ pub const REPORT_FILE: &str = "shape_train.json";
 pub const CODEBOOK_FORMAT: &str = "physnap.codebook/v1";
 /// Format tag of `shape_train.json`.
 pub const REPORT_FORMAT: &str = "physnap.shape_train/v1";
+/// Checkpoint state in the output directory (next to `shape_prior.safetensors`).
+pub const CHECKPOINT_FILE: &str = "shape_checkpoint.json";
+/// Format tag of `shape_checkpoint.json`.
+pub const CHECKPOINT_FORMAT: &str = "physnap.shape_checkpoint/v1";
+/// The config fields a resumed run must share with its checkpoint (they define the run's
+/// batches, schedule and model); the others (threads, evaluation, checkpointing, the decoder's
+/// backward implementation) may change between pieces.
+const RESUME_FIELDS: [&str; 11] = [
+    "model",
+    "max_parts",
+    "steps",
+    "batch_parts",
+    "queries_per_part",
+    "surface_points",
+    "lr",
+    "lr_final_factor",
+    "w_reg",
+    "truncation",
+    "seed",
+];
 /// Largest number of validation parts evaluated.
 pub const MAX_VAL_PARTS: usize = 64;
 /// A loss above this (or non-finite) counts as divergence.
@@ -97,6 +127,13 @@ pub struct ShapeTrainConfig {
     pub threads: Option<usize>,
     /// How the decoder's gradients are computed.
     pub decoder_backward: DecoderBackward,
+    /// Write a checkpoint every this many steps (0: none).
+    pub checkpoint_every: usize,
+    /// Continue from the checkpoint in the output directory, if there is one.
+    pub resume: bool,
+    /// End this run after this many steps in total, with a checkpoint (the schedule still
+    /// spans `steps`; continue with `resume`). None: run to `steps`.
+    pub stop_at: Option<usize>,
 }
 
 /// How a training step computes the SDF decoder's gradients. Both give the same gradients up
@@ -140,6 +177,9 @@ impl Default for ShapeTrainConfig {
             max_parts: None,
             threads: None,
             decoder_backward: DecoderBackward::Host,
+            checkpoint_every: 1000,
+            resume: false,
+            stop_at: None,
         }
     }
 }
@@ -173,6 +213,7 @@ impl ShapeTrainConfig {
         range("val_parts", self.val_parts, 0, MAX_VAL_PARTS)?;
         range("iou_resolution", self.iou_resolution, 8, 256)?;
         range("threads", self.threads.unwrap_or(1), 1, 1024)?;
+        range("stop_at", self.stop_at.unwrap_or(1), 1, self.steps)?;
         range("max_parts", self.max_parts.unwrap_or(1), 1, usize::MAX)?;
         let positive = |field: &str, v: f64, lo: f64, hi: f64| {
             if v.is_finite() && v > lo && v <= hi {
@@ -222,6 +263,7 @@ impl ShapeTrainConfig {
             "max_parts": self.max_parts,
             "threads": self.threads,
             "decoder_backward": self.decoder_backward.name(),
+            "checkpoint_every": self.checkpoint_every,
         })
     }
 }
@@ -1040,6 +1082,152 @@ pub fn train_shape(
     })
 }
 
+fn mean_of(xs: &[f64]) -> f64 {
+    xs.iter().sum::<f64>() / xs.len().max(1) as f64
+}
+
+/// What `shape_checkpoint.json` holds besides the weights: enough to continue the same batch
+/// stream (generator state and the rest of the shuffled epoch) and the same report. Adam's
+/// moment estimates are not kept; they restart from zero on resume, as in `train diffusion`.
+struct Checkpoint {
+    step: usize,
+    rng_state: u64,
+    epoch: Vec<usize>,
+    losses: Vec<f64>,
+    curve: Vec<EvalPoint>,
+    train_s: f64,
+    elapsed_s: f64,
+}
+
+/// Weights (temp file + rename), then `shape_checkpoint.json` (atomic) with the weights'
+/// sha256, so a crash between the two is detected on resume rather than mixing steps.
+fn write_checkpoint(
+    out: &Path,
+    cfg: &ShapeTrainConfig,
+    trainer: &Trainer<'_>,
+    c: &Checkpoint,
+) -> Result<(), TrainError> {
+    let weights = out.join(WEIGHTS_FILE);
+    let tmp = out.join("shape_prior.checkpoint.tmp");
+    save_shape_prior(
+        trainer
+            .model
+            .as_ref()
+            .expect("model is present between steps"),
+        &tmp,
+    )?;
+    let bytes = std::fs::read(&tmp).map_err(TrainError::io(&tmp))?;
+    std::fs::rename(&tmp, &weights).map_err(TrainError::io(&weights))?;
+    let doc = json!({
+        "format": CHECKPOINT_FORMAT,
+        "step": c.step,
+        "config": cfg.to_json(),
+        "weights_sha256": crate::model::weights::sha256_hex(&bytes),
+        "rng_state": c.rng_state.to_string(),
+        "epoch": c.epoch,
+        "losses": c.losses,
+        "curve": c.curve.iter().map(|e| json!({
+            "step": e.step, "elapsed_s": e.elapsed_s, "iou": e.iou, "l1": e.l1,
+        })).collect::<Vec<_>>(),
+        "train_s": c.train_s,
+        "elapsed_s": c.elapsed_s,
+    });
+    write_atomic(
+        &out.join(CHECKPOINT_FILE),
+        serde_json::to_string(&doc).unwrap_or_default().as_bytes(),
+    )
+}
+
+/// Read `out/shape_checkpoint.json`, refusing one written by a different run (a config field of
+/// [`RESUME_FIELDS`] differs: named with both values) or whose weights file is not the one it
+/// was written with.
+fn read_checkpoint(out: &Path, cfg: &ShapeTrainConfig) -> Result<Checkpoint, TrainError> {
+    let path = out.join(CHECKPOINT_FILE);
+    let text = std::fs::read_to_string(&path).map_err(TrainError::io(&path))?;
+    let v: Value =
+        serde_json::from_str(&text).map_err(|e| TrainError::data(&path, e.to_string()))?;
+    if v["format"] != CHECKPOINT_FORMAT {
+        return Err(TrainError::data(
+            &path,
+            format!("format {} is not {CHECKPOINT_FORMAT}", v["format"]),
+        ));
+    }
+    let ours = cfg.to_json();
+    for field in RESUME_FIELDS {
+        if v["config"][field] != ours[field] {
+            return Err(TrainError::Config {
+                field: field.to_string(),
+                limit: format!(
+                    "the checkpoint's value {} to resume {} (or start afresh without --resume)",
+                    v["config"][field],
+                    path.display()
+                ),
+                value: ours[field].to_string(),
+            });
+        }
+    }
+    let weights = out.join(WEIGHTS_FILE);
+    let bytes = std::fs::read(&weights).map_err(TrainError::io(&weights))?;
+    if v["weights_sha256"] != crate::model::weights::sha256_hex(&bytes).as_str() {
+        return Err(TrainError::data(
+            &weights,
+            format!(
+                "sha256 differs from the one {} recorded: the checkpoint is incomplete",
+                path.display()
+            ),
+        ));
+    }
+    let bad = |k: &str| TrainError::data(&path, format!("{k} is missing or malformed"));
+    let num = |k: &str| v[k].as_f64().ok_or_else(|| bad(k));
+    let step = v["step"].as_u64().ok_or_else(|| bad("step"))? as usize;
+    let rng_state = v["rng_state"]
+        .as_str()
+        .and_then(|s| s.parse::<u64>().ok())
+        .ok_or_else(|| bad("rng_state"))?;
+    let epoch = v["epoch"]
+        .as_array()
+        .and_then(|a| a.iter().map(|x| x.as_u64().map(|x| x as usize)).collect())
+        .ok_or_else(|| bad("epoch"))?;
+    let losses: Vec<f64> = v["losses"]
+        .as_array()
+        .and_then(|a| a.iter().map(Value::as_f64).collect())
+        .ok_or_else(|| bad("losses"))?;
+    let curve = v["curve"]
+        .as_array()
+        .and_then(|a| {
+            a.iter()
+                .map(|e| {
+                    Some(EvalPoint {
+                        step: e["step"].as_u64()? as usize,
+                        elapsed_s: e["elapsed_s"].as_f64()?,
+                        iou: e["iou"].as_f64()?,
+                        l1: e["l1"].as_f64()?,
+                    })
+                })
+                .collect()
+        })
+        .ok_or_else(|| bad("curve"))?;
+    if losses.len() != step || step >= cfg.steps {
+        return Err(TrainError::data(
+            &path,
+            format!(
+                "step {step} with {} losses does not fit a run of {} steps",
+                losses.len(),
+                cfg.steps
+            ),
+        ));
+    }
+    Ok(Checkpoint {
+        step,
+        rng_state,
+        epoch,
+        losses,
+        curve,
+        train_s: num("train_s")?,
+        elapsed_s: num("elapsed_s")?,
+    })
+}
+
 fn run(
     data: &Path,
     cfg: &ShapeTrainConfig,
@@ -1075,8 +1263,25 @@ fn run(
     let mut losses = Vec::with_capacity(cfg.steps);
     let mut curve = Vec::new();
     let mut train_s = 0.0;
+    // Seconds of training before this run (resumed runs), so `elapsed_s` spans the whole run.
+    let mut elapsed_before = 0.0;
+    let mut start = 0;
+    let ckpt_path = out.join(CHECKPOINT_FILE);
+    if cfg.resume && ckpt_path.is_file() {
+        let c = read_checkpoint(out, cfg)?;
+        trainer.model = Some(load_shape_prior(
+            &out.join(WEIGHTS_FILE),
+            &cfg.model,
+            &trainer.device,
+        )?);
+        trainer.rng = Rng::from_state(c.rng_state);
+        trainer.epoch = c.epoch;
+        (losses, curve, train_s, elapsed_before, start) =
+            (c.losses, c.curve, c.train_s, c.elapsed_s, c.step);
+    }
+    let end = cfg.stop_at.unwrap_or(cfg.steps).max(start);
     let t_train = Instant::now();
-    for step in 0..cfg.steps {
+    for step in start..end {
         let t_step = Instant::now();
         let (value, lr) = trainer.step(step)?;
         train_s += t_step.elapsed().as_secs_f64();
@@ -1087,7 +1292,7 @@ fn run(
         if eval_now && !val.is_empty() {
             let (ious, l1) = evaluate(&trainer.inference_model(), &val, cfg, &grid);
             let iou = ious.iter().sum::<f64>() / ious.len() as f64;
-            let elapsed_s = t_train.elapsed().as_secs_f64();
+            let elapsed_s = elapsed_before + t_train.elapsed().as_secs_f64();
             curve.push(EvalPoint {
                 step: done,
                 elapsed_s,
@@ -1101,28 +1306,62 @@ fn run(
             steps: cfg.steps,
             loss: value,
             lr,
-            elapsed_s: t_train.elapsed().as_secs_f64(),
+            elapsed_s: elapsed_before + t_train.elapsed().as_secs_f64(),
             val_iou,
             val_l1,
+        });
+        let checkpoint_now =
+            done == end || (cfg.checkpoint_every > 0 && done.is_multiple_of(cfg.checkpoint_every));
+        if done < cfg.steps && checkpoint_now {
+            write_checkpoint(
+                out,
+                cfg,
+                &trainer,
+                &Checkpoint {
+                    step: done,
+                    rng_state: trainer.rng.state(),
+                    epoch: trainer.epoch.clone(),
+                    losses: losses.clone(),
+                    curve: curve.clone(),
+                    train_s,
+                    elapsed_s: elapsed_before + t_train.elapsed().as_secs_f64(),
+                },
+            )?;
+        }
+    }
+    if end < cfg.steps {
+        // Stopped early (`stop_at`): the checkpoint holds the run; no final outputs yet.
+        return Ok(ShapeTrainReport {
+            steps: end,
+            wall_s: t0.elapsed().as_secs_f64(),
+            train_s,
+            initial_loss: mean_of(&losses[..losses.len().min(20)]),
+            final_loss: mean_of(&losses[losses.len().saturating_sub(50)..]),
+            val_iou: curve.last().map(|e| e.iou),
+            curve,
+            train_parts: parts.len(),
+            val_parts: val.len(),
+            codebook_rows: 0,
+            queries_per_s: (losses.len() * cfg.batch_parts * cfg.queries_per_part) as f64
+                / train_s.max(1e-9),
         });
     }
 
     let model = trainer.inference_model();
     save_shape_prior(&model, &out.join(WEIGHTS_FILE))?;
     let codebook_rows = write_codebook(&model, data, &all, cfg, out)?;
-    let mean = |xs: &[f64]| xs.iter().sum::<f64>() / xs.len().max(1) as f64;
     let report = ShapeTrainReport {
         steps: cfg.steps,
         wall_s: t0.elapsed().as_secs_f64(),
         train_s,
-        initial_loss: mean(&losses[..losses.len().min(20)]),
-        final_loss: mean(&losses[losses.len().saturating_sub(50)..]),
+        initial_loss: mean_of(&losses[..losses.len().min(20)]),
+        final_loss: mean_of(&losses[losses.len().saturating_sub(50)..]),
         val_iou: curve.last().map(|e| e.iou),
         curve,
         train_parts: parts.len(),
         val_parts: val.len(),
         codebook_rows,
-        queries_per_s: (cfg.steps * cfg.batch_parts * cfg.queries_per_part) as f64
+        queries_per_s: (losses.len() * cfg.batch_parts * cfg.queries_per_part) as f64
             / train_s.max(1e-9),
     };
     let doc = json!({
@@ -1151,6 +1390,10 @@ fn run(
             .unwrap_or_default()
             .as_bytes(),
     )?;
+    // The run is complete: a leftover checkpoint would describe older weights.
+    if ckpt_path.is_file() {
+        std::fs::remove_file(&ckpt_path).map_err(TrainError::io(&ckpt_path))?;
+    }
     Ok(report)
 }
 
@@ -1278,6 +1521,88 @@ mod tests {
         };
         let mesh = part_mesh(&part, Some(&adapter), &MeshingOptions { resolution: 24 }).unwrap();
         assert!(mesh.positions.iter().flatten().all(|v| v.is_finite()));
+    }
+
+    /// A run split by `stop_at` + `resume` continues the same batch stream and report: the
+    /// first resumed step's loss (the checkpoint's weights on the next batch, before any Adam
+    /// update) equals the uninterrupted run's bit for bit, the first piece's losses and
+    /// evaluations are kept, the checkpoint is removed at the end; a resume with other training
+    /// options or mismatching weights is refused, naming the field or the file.
+    #[test]
+    fn stopped_run_resumes_from_its_checkpoint() {
+        let data = tiny_dataset(39); // enough objects for a val split
+        let train = data.path().join("train");
+        let cfg = ShapeTrainConfig {
+            steps: 12,
+            eval_every: 4,
+            checkpoint_every: 0,
+            ..tiny_config()
+        };
+        let mut whole_losses = Vec::new();
+        let whole = train_shape(&train, &cfg, &data.path().join("whole"), &mut |p| {
+            whole_losses.push(p.loss)
+        })
+        .unwrap();
+
+        let out = data.path().join("split");
+        let first = ShapeTrainConfig {
+            stop_at: Some(6),
+            ..cfg.clone()
+        };
+        let mut losses = Vec::new();
+        let r1 = train_shape(&train, &first, &out, &mut |p| losses.push(p.loss)).unwrap();
+        assert_eq!(r1.steps, 6);
+        assert!(out.join(CHECKPOINT_FILE).is_file() && !out.join(REPORT_FILE).exists());
+        // Other training options: refused, naming the field and both values.
+        let other = ShapeTrainConfig {
+            lr: 1e-3,
+            resume: true,
+            ..cfg.clone()
+        };
+        let err = train_shape(&train, &other, &out, &mut |_| {})
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("lr") && err.contains("0.001") && err.contains("0.002"),
+            "{err}"
+        );
+
+        let resumed = ShapeTrainConfig {
+            resume: true,
+            ..cfg.clone()
+        };
+        let mut steps = Vec::new();
+        let r2 = train_shape(&train, &resumed, &out, &mut |p| {
+            steps.push(p.step);
+            losses.push(p.loss);
+        })
+        .unwrap();
+        assert_eq!(steps, (7..=12).collect::<Vec<_>>());
+        assert_eq!(r2.steps, 12);
+        assert_eq!(
+            losses[..7],
+            whole_losses[..7],
+            "same weights and batches up to step 7"
+        );
+        assert_eq!(r2.initial_loss.to_bits(), mean_of(&losses).to_bits());
+        let evals: Vec<usize> = r2.curve.iter().map(|e| e.step).collect();
+        assert_eq!(evals, [4, 8, 12]);
+        assert_eq!(r2.curve[0], r1.curve[0]);
+        assert_eq!(r2.curve[0].iou.to_bits(), whole.curve[0].iou.to_bits());
+        assert!(!out.join(CHECKPOINT_FILE).exists());
+        assert!(out.join(REPORT_FILE).is_file() && out.join(CODEBOOK_FILE).is_file());
+
+        // A checkpoint whose weights were replaced is refused, naming the weights file.
+        let broken = data.path().join("broken");
+        train_shape(&train, &first, &broken, &mut |_| {}).unwrap();
+        std::fs::copy(out.join(WEIGHTS_FILE), broken.join(WEIGHTS_FILE)).unwrap();
+        let err = train_shape(&train, &resumed, &broken, &mut |_| {})
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains(WEIGHTS_FILE) && err.contains("sha256"),
+            "{err}"
+        );
     }
 
     #[test]

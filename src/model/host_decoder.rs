@@ -283,7 +283,9 @@ pub struct WeightGrads {
     /// ∂L/∂(code features) per part, [P × hidden] flat: W_c's and b_c's gradients (and the
     /// code's) follow from it by the chain rule through z W_c + b_c.
     pub d_features: Vec<f32>,
-    /// ∂L/∂ of every other layer, in the order of [`HostDecoder::layer_order`].
+    /// ∂L/∂ of every other layer, in the decoder's field order: `fc_p`, then per residual
+    /// block `fc_0`, `fc_1` and `shortcut` when the block has one, then `fc_out` (`fc_c` is
+    /// not among them, see `d_features`).
     pub layers: Vec<LinearGrad>,
 }
 
@@ -398,22 +400,6 @@ impl HostDecoder {
                 },
             );
         g
-    }
-
-    /// The linear layers [`WeightGrads::layers`] holds, in its order (burn's field names):
-    /// `fc_p`, then per residual block `fc_0`, `fc_1` and `shortcut` when the block has one,
-    /// then `fc_out`. `fc_c` is not among them (see [`WeightGrads::d_features`]).
-    pub fn layer_order(&self) -> Vec<String> {
-        let mut names = vec!["fc_p".to_string()];
-        for (l, b) in self.blocks.iter().enumerate() {
-            names.push(format!("blocks.{l}.fc_0"));
-            names.push(format!("blocks.{l}.fc_1"));
-            if b.shortcut.is_some() {
-                names.push(format!("blocks.{l}.shortcut"));
-            }
-        }
-        names.push("fc_out".to_string());
-        names
     }
 
     fn layers(&self) -> Vec<&HostLinear> {

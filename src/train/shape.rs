@@ -884,7 +884,8 @@ fn l1_upstream(pred: f32, target: f32, truncation: Option<f32>) -> (f32, f32) {
     (r.abs(), sign)
 }
 
-/// The linear layers of `decoder` in [`HostDecoder::layer_order`]'s order.
+/// The linear layers of `decoder` in the order of `WeightGrads::layers`
+/// ([`HostDecoder::weight_grads`]).
 fn decoder_linears(decoder: &ShapeDecoder) -> Vec<&Linear> {
     let mut out = vec![&decoder.fc_p];
     for b in &decoder.blocks {
@@ -1329,29 +1330,8 @@ fn run(
             )?;
         }
     }
-    if end < cfg.steps {
-        // Stopped early (`stop_at`): the checkpoint holds the run; no final outputs yet.
-        return Ok(ShapeTrainReport {
-            steps: end,
-            wall_s: t0.elapsed().as_secs_f64(),
-            train_s,
-            initial_loss: mean_of(&losses[..losses.len().min(20)]),
-            final_loss: mean_of(&losses[losses.len().saturating_sub(50)..]),
-            val_iou: curve.last().map(|e| e.iou),
-            curve,
-            train_parts: parts.len(),
-            val_parts: val.len(),
-            codebook_rows: 0,
-            queries_per_s: (losses.len() * cfg.batch_parts * cfg.queries_per_part) as f64
-                / train_s.max(1e-9),
-        });
-    }
-
-    let model = trainer.inference_model();
-    save_shape_prior(&model, &out.join(WEIGHTS_FILE))?;
-    let codebook_rows = write_codebook(&model, data, &all, cfg, out)?;
-    let report = ShapeTrainReport {
-        steps: cfg.steps,
+    let report = |codebook_rows: usize, curve: Vec<EvalPoint>| ShapeTrainReport {
+        steps: end,
         wall_s: t0.elapsed().as_secs_f64(),
         train_s,
         initial_loss: mean_of(&losses[..losses.len().min(20)]),
@@ -1364,6 +1344,15 @@ fn run(
         queries_per_s: (losses.len() * cfg.batch_parts * cfg.queries_per_part) as f64
             / train_s.max(1e-9),
     };
+    if end < cfg.steps {
+        // Stopped early (`stop_at`): the checkpoint holds the run; no final outputs yet.
+        return Ok(report(0, curve));
+    }
+
+    let model = trainer.inference_model();
+    save_shape_prior(&model, &out.join(WEIGHTS_FILE))?;
+    let codebook_rows = write_codebook(&model, data, &all, cfg, out)?;
+    let report = report(codebook_rows, curve);
     let doc = json!({
         "format": REPORT_FORMAT,
         "config": cfg.to_json(),

@@ -582,11 +582,17 @@ fn progress_bar(total: usize, what: &str) -> indicatif::ProgressBar {
                         break;
                     }
                     let (pos, len) = (pb.position(), pb.length().unwrap_or(0));
+                    // Before the first step completes the rate is 0 and indicatif's ETA is
+                    // meaningless (billions of seconds).
+                    let eta = if pb.per_sec() > 0.0 && pos > 0 {
+                        format!("{}s", pb.eta().as_secs())
+                    } else {
+                        "unknown".to_string()
+                    };
                     tracing::info!(
-                        "{what}: {pos}/{len} ({:.1}%), {:.2}/s, eta {}s",
+                        "{what}: {pos}/{len} ({:.1}%), {:.2}/s, eta {eta}",
                         100.0 * pos as f64 / len.max(1) as f64,
                         pb.per_sec(),
-                        pb.eta().as_secs()
                     );
                 }
             });

@@ -334,6 +334,23 @@ pub struct EvalPoint {
     pub l1: f64,
 }
 
+impl EvalPoint {
+    /// `{"step", "elapsed_s", "iou", "l1"}` as in `shape_train.json` and checkpoints.
+    fn to_json(&self) -> Value {
+        json!({ "step": self.step, "elapsed_s": self.elapsed_s, "iou": self.iou, "l1": self.l1 })
+    }
+
+    /// The inverse of [`EvalPoint::to_json`] (None when a field is missing or not a number).
+    fn from_json(v: &Value) -> Option<Self> {
+        Some(EvalPoint {
+            step: v["step"].as_u64()? as usize,
+            elapsed_s: v["elapsed_s"].as_f64()?,
+            iou: v["iou"].as_f64()?,
+            l1: v["l1"].as_f64()?,
+        })
+    }
+}
+
 /// What a training run did.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ShapeTrainReport {
@@ -1127,9 +1144,7 @@ fn write_checkpoint(
         "rng_state": c.rng_state.to_string(),
         "epoch": c.epoch,
         "losses": c.losses,
-        "curve": c.curve.iter().map(|e| json!({
-            "step": e.step, "elapsed_s": e.elapsed_s, "iou": e.iou, "l1": e.l1,
-        })).collect::<Vec<_>>(),
+        "curve": c.curve.iter().map(EvalPoint::to_json).collect::<Vec<_>>(),
         "train_s": c.train_s,
         "elapsed_s": c.elapsed_s,
     });
@@ -1195,18 +1210,7 @@ fn read_checkpoint(out: &Path, cfg: &ShapeTrainConfig) -> Result<Checkpoint, Tra
         .ok_or_else(|| bad("losses"))?;
     let curve = v["curve"]
         .as_array()
-        .and_then(|a| {
-            a.iter()
-                .map(|e| {
-                    Some(EvalPoint {
-                        step: e["step"].as_u64()? as usize,
-                        elapsed_s: e["elapsed_s"].as_f64()?,
-                        iou: e["iou"].as_f64()?,
-                        l1: e["l1"].as_f64()?,
-                    })
-                })
-                .collect()
-        })
+        .and_then(|a| a.iter().map(EvalPoint::from_json).collect())
         .ok_or_else(|| bad("curve"))?;
     if losses.len() != step || step >= cfg.steps {
         return Err(TrainError::data(
@@ -1363,9 +1367,7 @@ fn run(
         "initial_loss": report.initial_loss,
         "final_loss": report.final_loss,
         "val_iou": report.val_iou,
-        "curve": report.curve.iter().map(|e| json!({
-            "step": e.step, "elapsed_s": e.elapsed_s, "iou": e.iou, "l1": e.l1,
-        })).collect::<Vec<_>>(),
+        "curve": report.curve.iter().map(EvalPoint::to_json).collect::<Vec<_>>(),
         "train_parts": report.train_parts,
         "val_parts": report.val_parts,
         "codebook_rows": report.codebook_rows,

@@ -42,6 +42,8 @@ def load(paths, variant, aware):
         ]
         if not rows:
             sys.exit(f"{p}: no row variant={variant} category_aware={aware}")
+        if "per_sample" not in rows[0]:
+            sys.exit(f"{p}: row {variant} has no per_sample records (written before they existed)")
         for s in rows[0]["per_sample"]:
             if s.get("diverged"):
                 diverged += 1
@@ -62,6 +64,11 @@ def boot_ratio(a, b, rng, draws=10000):
     if not ratios:
         return float("nan"), float("nan")
     return ratios[int(0.025 * len(ratios))], ratios[int(0.975 * len(ratios)) - 1]
+
+
+def share(v, t):
+    """Percentage of values above t."""
+    return f"{100 * sum(x > t for x in v) / len(v):.0f} %"
 
 
 def main():
@@ -95,10 +102,6 @@ def main():
         ma, mb = statistics.fmean(va), statistics.fmean(vb)
         lo, hi = boot_ratio(va, vb, rng)
         ratio = ma / mb if mb > 0 else float("inf")
-
-        def share(v, t):
-            return f"{100 * sum(x > t for x in v) / len(v):.0f} %"
-
         print(
             f"| {m} | {ma:.3g} | {mb:.3g} | {ratio:.2f} [{lo:.2f}, {hi:.2f}] "
             f"| {statistics.median(va):.2g} / {statistics.median(vb):.2g} "

@@ -24,7 +24,7 @@ use physnap::io::manifest::{LoadedModels, load_models};
 use physnap::mesh::MeshingOptions;
 use physnap::model::shape_prior::LatentSdfDecoder;
 
-use super::EvalGenerativeArgs;
+use super::{EvalGenerativeArgs, EvalShapeArgs};
 
 /// The imported data set's `dataset.json`, with its path for error messages.
 fn read_index(data: &Path) -> anyhow::Result<(std::path::PathBuf, serde_json::Value)> {
@@ -439,6 +439,120 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
         std::fs::write(out, serde_json::to_string_pretty(&report)? + "\n")
             .with_context(|| format!("writing {}", out.display()))?;
         println!("  report: {}", out.display());
+    }
+    Ok(())
+}
+
+/// Most parts `eval shape` evaluates (each costs a 64³ decode and its ground truth).
+const MAX_SHAPE_PARTS: usize = 5000;
+
+/// `physnap eval shape`: IoU of the weights' shape prior on parts of one split.
+pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
+    use physnap::train::shape::{PartIou, ShapeTrainConfig, evaluate_shape_prior};
+    let started = Instant::now();
+    if !["train", "val", "test"].contains(&a.split.as_str()) {
+        bail!("invalid --split {:?} (must be train, val or test)", a.split);
+    }
+    if !(1..=MAX_SHAPE_PARTS).contains(&a.parts) {
+        bail!(
+            "invalid --parts {}: must be between 1 and {MAX_SHAPE_PARTS}",
+            a.parts
+        );
+    }
+    let models = load_models(&a.weights, &physnap::model::cpu())?;
+    let report = &models.manifest.training["shape"];
+    let defaults = ShapeTrainConfig::default();
+    let surface_points = report["config"]["surface_points"]
+        .as_u64()
+        .map_or(defaults.surface_points, |n| n as usize);
+    let cfg = ShapeTrainConfig {
+        model: models.manifest.shape_prior.config,
+        surface_points,
+        iou_resolution: a.resolution,
+        ..defaults
+    };
+    let pb = super::progress_bar(a.parts, "parts");
+    let (parts, l1) = evaluate_shape_prior(
+        &models.shape_prior,
+        &a.data,
+        &cfg,
+        &a.split,
+        a.parts,
+        &mut |done, total| {
+            pb.set_length(total as u64);
+            pb.set_position(done as u64);
+        },
+    )?;
+    pb.finish_and_clear();
+    let cell = 1.1 / a.resolution as f64;
+    let mean = |sel: &[&PartIou]| -> Option<f64> {
+        (!sel.is_empty()).then(|| sel.iter().map(|p| p.iou).sum::<f64>() / sel.len() as f64)
+    };
+    let all: Vec<&PartIou> = parts.iter().collect();
+    let groups: [(&str, Vec<&PartIou>); 5] = [
+        ("all", all.clone()),
+        (
+            "single primitive",
+            all.iter()
+                .copied()
+                .filter(|p| p.primitives == Some(1))
+                .collect(),
+        ),
+        (
+            "several primitives",
+            all.iter()
+                .copied()
+                .filter(|p| p.primitives.is_some_and(|n| n > 1))
+                .collect(),
+        ),
+        (
+            "mesh",
+            all.iter()
+                .copied()
+                .filter(|p| p.primitives.is_none())
+                .collect(),
+        ),
+        (
+            "thinner than a grid cell",
+            all.iter().copied().filter(|p| p.thinnest < cell).collect(),
+        ),
+    ];
+    println!(
+        "shape prior of {}: {} {} parts of {}, {}³ grid (cell {cell:.4}), {:.0} s",
+        a.weights.display(),
+        parts.len(),
+        a.split,
+        a.data.display(),
+        a.resolution,
+        started.elapsed().as_secs_f64()
+    );
+    for (name, sel) in &groups {
+        if let Some(m) = mean(sel) {
+            println!("  {name:<26} {:>4} parts  mean IoU {m:.3}", sel.len());
+        }
+    }
+    println!("  mean SDF L1 {l1:.5} (normalised units)");
+    if let Some(out) = &a.out {
+        let doc = json!({
+            "format": "physnap.eval_shape/v1",
+            "weights": a.weights.display().to_string(),
+            "data": a.data.display().to_string(),
+            "split": a.split,
+            "resolution": a.resolution,
+            "surface_points": surface_points,
+            "mean_iou": mean(&all),
+            "l1": l1,
+            "groups": groups.iter().map(|(name, sel)| json!({
+                "name": name, "parts": sel.len(), "mean_iou": mean(sel),
+            })).collect::<Vec<_>>(),
+            "parts": parts.iter().map(|p| json!({
+                "key": p.key, "iou": p.iou, "primitives": p.primitives, "thinnest": p.thinnest,
+            })).collect::<Vec<_>>(),
+            "seconds": started.elapsed().as_secs_f64(),
+        });
+        std::fs::write(out, serde_json::to_string_pretty(&doc)?)
+            .with_context(|| format!("writing {}", out.display()))?;
+        println!("report: {}", out.display());
     }
     Ok(())
 }

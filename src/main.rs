@@ -87,6 +87,31 @@ enum EvalCommand {
     /// Guidance metrics (E_pc, D_pc, E_pen, E_mob medians) per variant on test scans, in the
     /// paper's Table 1 layout; writes guided_table.md and guided_table.json.
     Guided(Box<EvalGuidedArgs>),
+    /// Shape prior IoU (issue 4's "mean IoU on val parts at a 64³ grid"): per part and by kind
+    /// (single primitive, several primitives, mesh, thinner than a grid cell), plus SDF L1.
+    Shape(EvalShapeArgs),
+}
+
+#[derive(Args, Debug)]
+struct EvalShapeArgs {
+    /// Weights directory with manifest.json (its shape prior is evaluated).
+    #[arg(long, env = "PHYSNAP_WEIGHTS", default_value = "weights")]
+    weights: PathBuf,
+    /// Imported data set (output of `physnap data import`).
+    #[arg(long, env = "PHYSNAP_DATA")]
+    data: PathBuf,
+    /// Split to evaluate: val (the target's), test, or train (to tell under- from overfitting).
+    #[arg(long, env = "PHYSNAP_EVAL_SPLIT", default_value = "val")]
+    split: String,
+    /// Parts, spread evenly over the split (training evaluates 32 of val).
+    #[arg(long, env = "PHYSNAP_EVAL_PARTS", default_value_t = 64)]
+    parts: usize,
+    /// IoU grid cells per axis over [-0.55, 0.55]³.
+    #[arg(long, env = "PHYSNAP_EVAL_IOU_RESOLUTION", default_value_t = 64)]
+    resolution: usize,
+    /// Also write the report (with every part) as JSON here.
+    #[arg(long, env = "PHYSNAP_EVAL_OUT")]
+    out: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -146,6 +171,23 @@ enum TrainCommand {
     Diffusion(DiffusionArgs),
     /// (Re)build the retrieval codebook of a weights directory from a `train shape` output.
     Codebook(CodebookArgs),
+    /// Make a `train shape` output directory from a weights directory's shape prior (its
+    /// weights, its training report and every part of --data encoded), so `train diffusion`
+    /// can train a new denoiser on it without retraining the shape prior.
+    Encode(EncodeArgs),
+}
+
+#[derive(Args, Debug)]
+struct EncodeArgs {
+    /// Weights directory whose shape prior to use (manifest.json + shape_prior.safetensors).
+    #[arg(long, env = "PHYSNAP_WEIGHTS")]
+    weights: PathBuf,
+    /// Imported data set to encode (output of `physnap data import`).
+    #[arg(long, env = "PHYSNAP_DATA")]
+    data: PathBuf,
+    /// Output shape directory (shape_prior.safetensors, shape_train.json, codebook.npy/json).
+    #[arg(long, env = "PHYSNAP_OUT")]
+    out: PathBuf,
 }
 
 #[derive(Args, Debug)]
@@ -682,6 +724,7 @@ fn run(command: Command) -> anyhow::Result<()> {
             TrainCommand::Shape(a) => model_cmd::shape(a),
             TrainCommand::Diffusion(a) => model_cmd::diffusion(a),
             TrainCommand::Codebook(a) => model_cmd::codebook(a),
+            TrainCommand::Encode(a) => model_cmd::encode(a),
         },
         Command::Generate(a) => model_cmd::generate(a),
         Command::Serve(a) => serve_cmd::serve(a),
@@ -697,6 +740,7 @@ fn run(command: Command) -> anyhow::Result<()> {
         Command::Eval { command } => match command {
             EvalCommand::Generative(a) => eval_cmd::generative(a),
             EvalCommand::Guided(a) => model_cmd::eval_guided(*a),
+            EvalCommand::Shape(a) => eval_cmd::shape(a),
         },
     }
 }

@@ -27,9 +27,11 @@ use physnap::train::codebook::{
     CODEBOOK_WEIGHTS_FILE, CodebookReport, DEFAULT_CHECK_RESOLUTION, build_codebook,
 };
 use physnap::train::diffusion::{DiffusionTrainConfig, load_data, train_diffusion};
-use physnap::train::shape::{DecoderBackward, ShapeTrainConfig, read_model_config, train_shape};
+use physnap::train::shape::{
+    DecoderBackward, ShapeTrainConfig, encode_shape_dir, read_model_config, train_shape,
+};
 
-use super::{CodebookArgs, DiffusionArgs, EvalGuidedArgs, GenerateArgs, ShapeArgs};
+use super::{CodebookArgs, DiffusionArgs, EncodeArgs, EvalGuidedArgs, GenerateArgs, ShapeArgs};
 
 pub fn shape(a: ShapeArgs) -> anyhow::Result<()> {
     let defaults = ShapeTrainConfig::default();
@@ -89,6 +91,42 @@ pub fn shape(a: ShapeArgs) -> anyhow::Result<()> {
             .unwrap_or_else(|| "n/a".into())
     );
     println!("weights and codebook: {}", a.out.display());
+    Ok(())
+}
+
+pub fn encode(a: EncodeArgs) -> anyhow::Result<()> {
+    let path = a.weights.join("manifest.json");
+    let text =
+        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let manifest = physnap::io::manifest::from_str(&text, &path.display().to_string())?;
+    let file = a.weights.join(&manifest.shape_prior.file);
+    let sha =
+        sha256_hex(&std::fs::read(&file).with_context(|| format!("reading {}", file.display()))?);
+    if sha != manifest.shape_prior.sha256 {
+        bail!(
+            "{}: sha256 {sha} does not match manifest.json's shape_prior.sha256 {}; the file is corrupt or from other weights",
+            file.display(),
+            manifest.shape_prior.sha256
+        );
+    }
+    let report = &manifest.training["shape"];
+    if !report.is_object() {
+        bail!(
+            "{}: no training.shape report (the shape prior's shape_train.json), which holds the encoder input size",
+            path.display()
+        );
+    }
+    let t = std::time::Instant::now();
+    let enc = encode_shape_dir(&file, report, &a.data, &a.out)?;
+    println!(
+        "encoded {} parts of {} ({} surface points each) with {} in {:.0} s; shape directory: {}",
+        enc.rows,
+        a.data.display(),
+        enc.surface_points,
+        file.display(),
+        t.elapsed().as_secs_f64(),
+        a.out.display()
+    );
     Ok(())
 }
 

@@ -247,6 +247,81 @@ fn synth_import_train_generate() {
     ]);
     assert_eq!(&std::fs::read(&png).unwrap()[..4], b"\x89PNG");
 
+    // `train encode` turns the weights' shape prior back into the shape directory a new
+    // denoiser trains on: the same codebook, byte for byte.
+    let shape2 = root.path().join("shape2");
+    let out = ok(&[
+        "train",
+        "encode",
+        "--weights",
+        s(&weights),
+        "--data",
+        s(&data),
+        "--out",
+        s(&shape2),
+    ]);
+    assert!(out.contains("encoded"), "{out}");
+    for f in ["codebook.npy", "codebook.json", "shape_prior.safetensors"] {
+        assert_eq!(
+            std::fs::read(shape.join(f)).unwrap(),
+            std::fs::read(shape2.join(f)).unwrap(),
+            "{f}"
+        );
+    }
+
+    // `eval shape` reports the shape prior's IoU per part and overall.
+    let report = root.path().join("shape_eval.json");
+    let out = ok(&[
+        "eval",
+        "shape",
+        "--weights",
+        s(&weights),
+        "--data",
+        s(&data),
+        "--split",
+        "train",
+        "--parts",
+        "3",
+        "--resolution",
+        "16",
+        "--out",
+        s(&report),
+    ]);
+    assert!(out.contains("mean IoU"), "{out}");
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let parts = r["parts"].as_array().unwrap();
+    assert!((1..=3).contains(&parts.len()), "{r}");
+    assert_eq!(r["split"], "train");
+    let mean = r["mean_iou"].as_f64().unwrap();
+    let by_hand = parts
+        .iter()
+        .map(|p| p["iou"].as_f64().unwrap())
+        .sum::<f64>()
+        / parts.len() as f64;
+    assert!(
+        (0.0..=1.0).contains(&mean) && (mean - by_hand).abs() < 1e-12,
+        "{r}"
+    );
+    for (flag, value, expect) in [
+        ("--split", "holdout", "invalid --split \"holdout\""),
+        ("--parts", "0", "invalid --parts 0: must be between 1 and"),
+    ] {
+        let o = physnap(&[
+            "eval",
+            "shape",
+            "--weights",
+            s(&weights),
+            "--data",
+            s(&data),
+            flag,
+            value,
+        ]);
+        assert!(!o.status.success());
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(e.contains(expect), "{e}");
+    }
+
     // Bad inputs are refused clearly.
     let o = physnap(&[
         "generate",
@@ -279,6 +354,28 @@ fn synth_import_train_generate() {
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(
         e.contains("sha256 mismatch") && e.contains("denoiser.safetensors"),
+        "{e}"
+    );
+    // So is a corrupted shape prior, by `train encode`.
+    let w = weights.join("shape_prior.safetensors");
+    let mut bytes = std::fs::read(&w).unwrap();
+    let n = bytes.len();
+    bytes[n - 3] ^= 0xFF;
+    std::fs::write(&w, bytes).unwrap();
+    let o = physnap(&[
+        "train",
+        "encode",
+        "--weights",
+        s(&weights),
+        "--data",
+        s(&data),
+        "--out",
+        s(&root.path().join("shape3")),
+    ]);
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        e.contains("shape_prior.safetensors") && e.contains("does not match manifest.json"),
         "{e}"
     );
 }

@@ -284,6 +284,11 @@ pub fn read_model_config(report: &Path) -> Result<ShapePriorConfig, TrainError> 
     let text = std::fs::read_to_string(report).map_err(TrainError::io(report))?;
     let v: Value =
         serde_json::from_str(&text).map_err(|e| TrainError::data(report, e.to_string()))?;
+    model_config_of(&v, report)
+}
+
+/// The model sizes in a parsed `shape_train.json` document; `source` names it in errors.
+fn model_config_of(v: &Value, report: &Path) -> Result<ShapePriorConfig, TrainError> {
     let get = |k: &str| -> Result<usize, TrainError> {
         v["config"]["model"][k]
             .as_u64()
@@ -681,47 +686,85 @@ fn evaluate(
 
 /// The val parts a run evaluates: `cfg.val_parts` spread evenly over the val split.
 fn val_selection<'a>(all: &'a [PartRef], cfg: &ShapeTrainConfig) -> Vec<&'a PartRef> {
-    let val_all: Vec<&PartRef> = all.iter().filter(|p| p.split == "val").collect();
-    let n = cfg.val_parts.min(val_all.len());
-    (0..n).map(|i| val_all[i * val_all.len() / n]).collect()
+    split_selection(all, "val", cfg.val_parts)
 }
 
-/// IoU of one val part.
+/// `n` parts of `split` spread evenly over it (dataset order); all of them when it has fewer.
+fn split_selection<'a>(all: &'a [PartRef], split: &str, n: usize) -> Vec<&'a PartRef> {
+    let of_split: Vec<&PartRef> = all.iter().filter(|p| p.split == split).collect();
+    let n = n.min(of_split.len());
+    (0..n).map(|i| of_split[i * of_split.len() / n]).collect()
+}
+
+/// IoU of one evaluated part, with what makes a part hard for the 64³ grid.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PartIou {
     /// `<id>_<k>`.
     pub key: String,
     /// IoU of `SDF < 0` against ground truth on the grid.
     pub iou: f64,
+    /// Number of analytic primitives (None: a mesh part).
+    pub primitives: Option<usize>,
+    /// Thinnest box extent over the part's normalisation scale κ (the AABB diagonal), i.e. in
+    /// normalised units where the grid spacing is 1.1 / resolution.
+    pub thinnest: f64,
 }
 
-/// Evaluate `model` on `data`'s val parts exactly as training does (`cfg.val_parts` parts,
-/// `cfg.iou_resolution`³ grid, codes from the first `cfg.surface_points` surface points).
+/// Parts per batch of [`evaluate_shape_prior`] (bounds the ground-truth grids in memory).
+const EVAL_CHUNK: usize = 32;
+
+/// Evaluate `model` on `n` parts of `split` (spread evenly over it) exactly as training
+/// evaluates its val parts (`cfg.iou_resolution`³ grid, codes from the first
+/// `cfg.surface_points` surface points). `progress(done, total)` after every batch of parts.
 /// Returns per-part IoUs and the mean L1 on the parts' first `cfg.queries_per_part` samples.
 pub fn evaluate_shape_prior(
     model: &ShapePrior,
     data: &Path,
     cfg: &ShapeTrainConfig,
+    split: &str,
+    n: usize,
+    progress: &mut dyn FnMut(usize, usize),
 ) -> Result<(Vec<PartIou>, f64), TrainError> {
     cfg.validate()?;
     let all = read_index(data)?;
-    let refs = val_selection(&all, cfg);
+    let refs = split_selection(&all, split, n);
+    if refs.is_empty() {
+        return Err(TrainError::data(
+            data.join("dataset.json"),
+            format!("no parts in split {split:?}"),
+        ));
+    }
     let grid_pts = iou_grid(cfg.iou_resolution);
-    let val: Vec<ValPart> = refs
-        .iter()
-        .map(|p| load_val_part(data, p, cfg, &grid_pts))
-        .collect::<Result<_, _>>()?;
-    let grid: Vec<f32> = grid_pts.into_iter().flatten().collect();
-    let (ious, l1) = evaluate(&model.valid(), &val, cfg, &grid);
-    let per_part = refs
-        .iter()
-        .zip(ious)
-        .map(|(p, iou)| PartIou {
-            key: format!("{}_{}", p.id, p.k),
-            iou,
-        })
-        .collect();
-    Ok((per_part, l1))
+    let grid: Vec<f32> = grid_pts.iter().flatten().copied().collect();
+    let model = model.valid();
+    let (mut per_part, mut l1_sum) = (Vec::with_capacity(refs.len()), 0.0);
+    for chunk in refs.chunks(EVAL_CHUNK) {
+        let parts: Vec<ValPart> = chunk
+            .par_iter()
+            .map(|p| load_val_part(data, p, cfg, &grid_pts))
+            .collect::<Result<_, _>>()?;
+        let (ious, l1) = evaluate(&model, &parts, cfg, &grid);
+        l1_sum += l1 * chunk.len() as f64;
+        for (p, iou) in chunk.iter().zip(ious) {
+            let file = data.join("objects").join(&p.id).join("object.json");
+            let obj = crate::io::object_json::read(&file)
+                .map_err(|e| TrainError::data(&file, e.to_string()))?;
+            let part = obj.parts.get(p.k).ok_or_else(|| {
+                TrainError::data(&file, format!("no part {} (dataset.json lists it)", p.k))
+            })?;
+            per_part.push(PartIou {
+                key: format!("{}_{}", p.id, p.k),
+                iou,
+                primitives: match &part.shape {
+                    PartShape::Primitives(prims) => Some(prims.len()),
+                    _ => None,
+                },
+                thinnest: 2.0 * part.half_extents.min() / part.kappa(),
+            });
+        }
+        progress(per_part.len(), refs.len());
+    }
+    Ok((per_part, l1_sum / refs.len() as f64))
 }
 
 /// Write `bytes` to `path` atomically (temp file + rename).
@@ -774,6 +817,73 @@ pub fn load_shape_prior(
         ));
     }
     Ok(model)
+}
+
+/// What [`encode_shape_dir`] wrote.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EncodeReport {
+    /// Codebook rows (every part of every split of the data set).
+    pub rows: usize,
+    /// Encoder input: surface points per part.
+    pub surface_points: usize,
+}
+
+/// Make a `train shape` output directory (`shape_prior.safetensors`, `shape_train.json`,
+/// `codebook.npy` + `codebook.json`) for an already trained shape prior: its weights
+/// (`weights_file`) and its training report (`report`, the `shape_train.json` it was trained
+/// with; a weights manifest keeps it under `training.shape`), with every part of `data`
+/// encoded as `train shape` does at its end (first `config.surface_points` surface points).
+///
+/// Why: `train diffusion` trains on a shape directory, and the shipped weights keep only the
+/// shape prior, not that directory. With this a new denoiser (a longer schedule, another seed,
+/// another imported data set) trains on the shipped shape prior without retraining it; on the
+/// data set the prior was trained on, the codes are those of the original run.
+///
+/// The report is copied with `data` and `codebook_rows` set to this encoding's and an
+/// `"encoded_from"` entry naming `weights_file`.
+pub fn encode_shape_dir(
+    weights_file: &Path,
+    report: &Value,
+    data: &Path,
+    out: &Path,
+) -> Result<EncodeReport, TrainError> {
+    let model_cfg = model_config_of(report, weights_file)?;
+    let surface_points = report["config"]["surface_points"]
+        .as_u64()
+        .filter(|&n| n > 0)
+        .ok_or_else(|| {
+            TrainError::data(
+                weights_file,
+                "its training report has no config.surface_points (the encoder input size)",
+            )
+        })? as usize;
+    let model = load_shape_prior(weights_file, &model_cfg, &cpu())?;
+    let all = read_index(data)?;
+    std::fs::create_dir_all(out).map_err(TrainError::io(out))?;
+    let cfg = ShapeTrainConfig {
+        model: model_cfg,
+        surface_points,
+        ..ShapeTrainConfig::default()
+    };
+    let rows = write_codebook(&model, data, &all, &cfg, out)?;
+    let dst = out.join(WEIGHTS_FILE);
+    if dst != weights_file {
+        std::fs::copy(weights_file, &dst).map_err(TrainError::io(&dst))?;
+    }
+    let mut doc = report.clone();
+    doc["data"] = json!(data.display().to_string());
+    doc["codebook_rows"] = json!(rows);
+    doc["encoded_from"] = json!(weights_file.display().to_string());
+    write_atomic(
+        &out.join(REPORT_FILE),
+        serde_json::to_string_pretty(&doc)
+            .unwrap_or_default()
+            .as_bytes(),
+    )?;
+    Ok(EncodeReport {
+        rows,
+        surface_points,
+    })
 }
 
 /// A `train shape` codebook as read back: codes (row-major) with their `codebook.json` keys.
@@ -1512,6 +1622,61 @@ mod tests {
         };
         let mesh = part_mesh(&part, Some(&adapter), &MeshingOptions { resolution: 24 }).unwrap();
         assert!(mesh.positions.iter().flatten().all(|v| v.is_finite()));
+
+        // Re-encoding the data set from the weights and report alone (what `train encode` does
+        // with a shipped weights directory) gives the same codebook, byte for byte, and a
+        // report `train diffusion` reads the model config from.
+        let report_doc: Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join(REPORT_FILE)).unwrap()).unwrap();
+        let again = data.path().join("again");
+        let enc = encode_shape_dir(
+            &out.join(WEIGHTS_FILE),
+            &report_doc,
+            &data.path().join("train"),
+            &again,
+        )
+        .unwrap();
+        assert_eq!(
+            (enc.rows, enc.surface_points),
+            (parts.len(), cfg.surface_points)
+        );
+        for f in [CODEBOOK_FILE, CODEBOOK_INDEX_FILE, WEIGHTS_FILE] {
+            assert_eq!(
+                std::fs::read(out.join(f)).unwrap(),
+                std::fs::read(again.join(f)).unwrap(),
+                "{f}"
+            );
+        }
+        assert_eq!(
+            read_model_config(&again.join(REPORT_FILE)).unwrap(),
+            cfg.model
+        );
+        // A report without the encoder input size, or weights of another size, are refused.
+        let mut no_points = report_doc.clone();
+        no_points["config"]["surface_points"] = Value::Null;
+        let err = encode_shape_dir(
+            &out.join(WEIGHTS_FILE),
+            &no_points,
+            &data.path().join("train"),
+            &again,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains("surface_points"), "{err}");
+        let mut wider = report_doc;
+        wider["config"]["model"]["decoder_hidden"] = json!(cfg.model.decoder_hidden * 2);
+        let err = encode_shape_dir(
+            &out.join(WEIGHTS_FILE),
+            &wider,
+            &data.path().join("train"),
+            &again,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            err.contains(WEIGHTS_FILE) && err.contains("decoder.fc_p.weight"),
+            "{err}"
+        );
     }
 
     /// A run split by `stop_at` + `resume` continues the same batch stream and report: the
@@ -1980,19 +2145,17 @@ mod tests {
             val_parts: var("VAL_PARTS").map_or(MAX_VAL_PARTS, |v| v.parse().unwrap()),
             ..ShapeTrainConfig::default()
         };
-        let (ious, l1) = evaluate_shape_prior(&model, data, &cfg).unwrap();
+        let (ious, l1) =
+            evaluate_shape_prior(&model, data, &cfg, "val", cfg.val_parts, &mut |_, _| {}).unwrap();
         for p in &ious {
-            let (id, k) = p.key.rsplit_once('_').unwrap();
-            let obj =
-                crate::io::object_json::read(&data.join("objects").join(id).join("object.json"))
-                    .unwrap();
-            let part = &obj.parts[k.parse::<usize>().unwrap()];
-            let thin = 2.0 * part.half_extents.min() / part.kappa();
-            let kind = match &part.shape {
-                PartShape::Primitives(p) => format!("{} primitives", p.len()),
-                _ => "mesh".into(),
+            let kind = match p.primitives {
+                Some(n) => format!("{n} primitives"),
+                None => "mesh".into(),
             };
-            println!("{} iou {:.3} thickness {thin:.4} {kind}", p.key, p.iou);
+            println!(
+                "{} iou {:.3} thickness {:.4} {kind}",
+                p.key, p.iou, p.thinnest
+            );
         }
         let mean = ious.iter().map(|p| p.iou).sum::<f64>() / ious.len() as f64;
         println!("mean iou {mean:.4} over {} parts, l1 {l1:.5}", ious.len());

@@ -12,7 +12,7 @@
 #
 # Knobs (environment; the defaults are the shipped recipe, smaller values make a smoke run):
 #   PHYSNAP_BIN   physnap binary (default: cargo build --release, then target/release/physnap)
-#   OBJECTS (3000)  SHAPE_STEPS (3000)  STAGE1 (2000)  STAGE2 (3500)  STEPS (7000)
+#   OBJECTS (3000)  SHAPE_STEPS (3000)  STAGE1 (2000)  STAGE2 (3500; 0: no stop between)  STEPS (7000)
 #   BATCH_OBJECTS (16)  CHECKPOINT_EVERY (500)  IMPORT_FLAGS ("")  SHAPE_FLAGS ("")
 #   DENOISER_FLAGS ("")  EVAL (1: run eval generative; 0: skip)
 set -euo pipefail
@@ -34,8 +34,13 @@ if [ -z "${PHYSNAP_BIN:-}" ]; then
   cargo build --release --locked
   PHYSNAP_BIN=target/release/physnap
 fi
-if ! [ "$STAGE1" -lt "$STAGE2" ] || ! [ "$STAGE2" -lt "$STEPS" ]; then
-  echo "invalid stages: need STAGE1 < STAGE2 < STEPS, got $STAGE1, $STAGE2, $STEPS" >&2
+if [ "$STAGE2" = 0 ]; then
+  if ! [ "$STAGE1" -lt "$STEPS" ]; then
+    echo "invalid stages: need STAGE1 < STEPS, got $STAGE1, $STEPS" >&2
+    exit 2
+  fi
+elif ! [ "$STAGE1" -lt "$STAGE2" ] || ! [ "$STAGE2" -lt "$STEPS" ]; then
+  echo "invalid stages: need STAGE1 < STAGE2 < STEPS (or STAGE2=0), got $STAGE1, $STAGE2, $STEPS" >&2
   exit 2
 fi
 run() {
@@ -63,8 +68,10 @@ run train diffusion "${common[@]}" --steps "$STAGE1" --lr-final-factor 1 --ema-d
 # Stages 2 and 3: cosine decay from STAGE1 to 0.1 x lr over the run to STEPS, EMA 0.999 from
 # STAGE1; resumed once at STAGE2.
 decay=(--steps "$STEPS" --lr-decay-start "$STAGE1" --lr-final-factor 0.1 --ema-decay 0.999 --resume)
-# shellcheck disable=SC2086
-run train diffusion "${common[@]}" "${decay[@]}" --stop-at "$STAGE2" $DENOISER_FLAGS
+if [ "$STAGE2" != 0 ]; then
+  # shellcheck disable=SC2086
+  run train diffusion "${common[@]}" "${decay[@]}" --stop-at "$STAGE2" $DENOISER_FLAGS
+fi
 # shellcheck disable=SC2086
 run train diffusion "${common[@]}" "${decay[@]}" $DENOISER_FLAGS
 if [ "$EVAL" = 1 ]; then

@@ -450,4 +450,36 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("STAGE1 < STAGE2 < STEPS"));
     assert!(!root.path().join("bad").exists());
+
+    // STAGE2=0: two denoiser runs, the second resuming at STAGE1 and running to STEPS.
+    let two = root.path().join("two");
+    let o = Command::new("bash")
+        .arg(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/scripts/reproduce-weights.sh"
+        ))
+        .arg(&two)
+        .env("PHYSNAP_BIN", env!("CARGO_BIN_EXE_physnap"))
+        .env("PHYSNAP_LOG", "warn")
+        .env("OBJECTS", "26")
+        .env("SHAPE_STEPS", "2")
+        .env("STAGE1", "2")
+        .env("STAGE2", "0")
+        .env("STEPS", "4")
+        .env("BATCH_OBJECTS", "2")
+        .env("IMPORT_FLAGS", "--uniform 256 --near 256 --surface 64")
+        .env("SHAPE_FLAGS", "--batch-parts 4")
+        .env("DENOISER_FLAGS", "--width 32 --layers 1")
+        .env("EVAL", "0")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert_eq!(err.matches("+ physnap train diffusion").count(), 2, "{err}");
+    let summary = read(&two.join("weights/diffusion_train.json"));
+    assert_eq!(
+        (&summary["completed"], &summary["resumed_from"]),
+        (&serde_json::json!(4), &serde_json::json!(2)),
+        "{summary:#}"
+    );
 }

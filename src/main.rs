@@ -240,6 +240,39 @@ struct ShapeArgs {
     /// schedule still spans --steps; continue with --resume).
     #[arg(long, env = "PHYSNAP_SHAPE_STOP_AT")]
     stop_at: Option<usize>,
+    /// SDF decoder width (default 128; NAP: 256). The latent stays 128, the denoiser's F.
+    #[arg(long, env = "PHYSNAP_SHAPE_DECODER_HIDDEN")]
+    decoder_hidden: Option<usize>,
+    /// SDF decoder residual blocks (default 4; NAP: 5).
+    #[arg(long, env = "PHYSNAP_SHAPE_DECODER_BLOCKS")]
+    decoder_blocks: Option<usize>,
+    /// Point encoder width (default 128; NAP: 512).
+    #[arg(long, env = "PHYSNAP_SHAPE_ENCODER_HIDDEN")]
+    encoder_hidden: Option<usize>,
+    /// Point encoder residual blocks (default 4; NAP: 5).
+    #[arg(long, env = "PHYSNAP_SHAPE_ENCODER_BLOCKS")]
+    encoder_blocks: Option<usize>,
+    /// Positional-encoding octaves of the query (default 8, as NAP).
+    #[arg(long, env = "PHYSNAP_SHAPE_PE_FREQS")]
+    pe_freqs: Option<usize>,
+    /// SDF queries per part and step, half uniform and half near-surface (default 2048).
+    #[arg(long, env = "PHYSNAP_SHAPE_QUERIES_PER_PART")]
+    queries_per_part: Option<usize>,
+    /// Encoder input points per part (default 512).
+    #[arg(long, env = "PHYSNAP_SHAPE_SURFACE_POINTS")]
+    surface_points: Option<usize>,
+    /// Adam learning rate at step 0 (default 1e-3).
+    #[arg(long, env = "PHYSNAP_SHAPE_LR")]
+    lr: Option<f64>,
+    /// Cosine decay to lr × this at the last step (default 0.1; 1: constant).
+    #[arg(long, env = "PHYSNAP_SHAPE_LR_FINAL_FACTOR")]
+    lr_final_factor: Option<f64>,
+    /// Truncate the L1 loss to the band [−δ, δ] (DeepSDF); default: plain L1, as NAP.
+    #[arg(long, env = "PHYSNAP_SHAPE_TRUNCATION")]
+    truncation: Option<f32>,
+    /// Val parts evaluated every --eval-every steps (default 32, at most 64).
+    #[arg(long, env = "PHYSNAP_SHAPE_VAL_PARTS")]
+    val_parts: Option<usize>,
 }
 
 #[derive(Args, Debug)]

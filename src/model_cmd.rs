@@ -35,7 +35,22 @@ use super::{CodebookArgs, DiffusionArgs, EncodeArgs, EvalGuidedArgs, GenerateArg
 
 pub fn shape(a: ShapeArgs) -> anyhow::Result<()> {
     let defaults = ShapeTrainConfig::default();
+    let m = defaults.model;
     let cfg = ShapeTrainConfig {
+        model: physnap::model::shape_prior::ShapePriorConfig {
+            decoder_hidden: a.decoder_hidden.unwrap_or(m.decoder_hidden),
+            decoder_blocks: a.decoder_blocks.unwrap_or(m.decoder_blocks),
+            encoder_hidden: a.encoder_hidden.unwrap_or(m.encoder_hidden),
+            encoder_blocks: a.encoder_blocks.unwrap_or(m.encoder_blocks),
+            pe_freqs: a.pe_freqs.unwrap_or(m.pe_freqs),
+            ..m
+        },
+        queries_per_part: a.queries_per_part.unwrap_or(defaults.queries_per_part),
+        surface_points: a.surface_points.unwrap_or(defaults.surface_points),
+        lr: a.lr.unwrap_or(defaults.lr),
+        lr_final_factor: a.lr_final_factor.unwrap_or(defaults.lr_final_factor),
+        truncation: a.truncation.or(defaults.truncation),
+        val_parts: a.val_parts.unwrap_or(defaults.val_parts),
         steps: a.steps,
         seed: a.seed,
         batch_parts: a.batch_parts.unwrap_or(defaults.batch_parts),

@@ -81,9 +81,64 @@ fn synth_import_train_generate() {
         "6",
         "--batch-parts",
         "4",
+        // A non-default model and loss: the sizes flow through the manifest to every loader.
+        "--decoder-hidden",
+        "48",
+        "--decoder-blocks",
+        "2",
+        "--encoder-hidden",
+        "32",
+        "--encoder-blocks",
+        "1",
+        "--queries-per-part",
+        "512",
+        "--surface-points",
+        "64",
+        "--truncation",
+        "0.1",
     ]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "train shape failed:\n{err}");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(shape.join("shape_train.json")).unwrap())
+            .unwrap();
+    let c = &report["config"];
+    assert_eq!(
+        (
+            &c["model"]["decoder_hidden"],
+            &c["model"]["encoder_blocks"],
+            &c["queries_per_part"],
+            &c["surface_points"],
+        ),
+        (
+            &serde_json::json!(48),
+            &serde_json::json!(1),
+            &serde_json::json!(512),
+            &serde_json::json!(64)
+        ),
+        "{c:#}"
+    );
+    assert!(
+        (c["truncation"].as_f64().unwrap() - 0.1).abs() < 1e-6,
+        "{c:#}"
+    );
+    // An out-of-range size is refused, naming the field, the limit and the value.
+    let o = physnap(&[
+        "train",
+        "shape",
+        "--data",
+        s(&data),
+        "--out",
+        s(&root.path().join("bad_shape")),
+        "--decoder-hidden",
+        "0",
+    ]);
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        e.contains("decoder_hidden") && e.contains("between 1 and") && e.contains('0'),
+        "{e}"
+    );
     assert!(
         err.lines()
             .any(|l| l.contains("shape: ") && l.contains("/6 (")),
@@ -123,6 +178,7 @@ fn synth_import_train_generate() {
     assert_eq!(manifest["format"], "physnap.weights/v1");
     assert_eq!(manifest["categories"].as_array().unwrap().len(), 46);
     assert_eq!(manifest["denoiser"]["sha256"].as_str().unwrap().len(), 64);
+    assert_eq!(manifest["shape_prior"]["config"]["decoder_hidden"], 48);
     // The retrieval codebook: training-split codes that mesh non-empty, sha256 in the manifest.
     let cb = &manifest["codebook"];
     let rows = cb["config"]["rows"].as_u64().unwrap() as usize;

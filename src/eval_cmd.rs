@@ -419,20 +419,12 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
         "command": std::env::args().collect::<Vec<_>>().join(" "),
     });
     if a.write_manifest {
-        // Record the figures in the weights' manifest (the weights files and their sha256 are
-        // untouched): metrics.generative = this report, metrics.shape_val_iou from training.
-        let path = a.weights.join("manifest.json");
-        let mut m: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path)?)
-            .with_context(|| format!("parsing {}", path.display()))?;
-        let iou = m["training"]["shape"]["val_iou"].clone();
-        if !m["metrics"].is_object() {
-            m["metrics"] = json!({});
-        }
-        m["metrics"]["generative"] = report.clone();
-        m["metrics"]["shape_val_iou"] = iou;
-        let tmp = path.with_extension("json.tmp");
-        std::fs::write(&tmp, serde_json::to_string_pretty(&m)? + "\n")?;
-        std::fs::rename(&tmp, &path)?;
+        // metrics.generative = this report, metrics.shape_val_iou from training.
+        let path = record_in_manifest(&a.weights, |m| {
+            let iou = m["training"]["shape"]["val_iou"].clone();
+            m["metrics"]["generative"] = report.clone();
+            m["metrics"]["shape_val_iou"] = iou;
+        })?;
         println!("  metrics recorded in {}", path.display());
     }
     if let Some(out) = &a.out {
@@ -441,6 +433,26 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
         println!("  report: {}", out.display());
     }
     Ok(())
+}
+
+/// Record evaluation figures in `weights/manifest.json` under `metrics` (`set` edits the parsed
+/// manifest; `metrics` is an object when it runs). The weights files and their sha256 are
+/// untouched; the file is replaced atomically. Returns the manifest's path.
+fn record_in_manifest(
+    weights: &Path,
+    set: impl FnOnce(&mut serde_json::Value),
+) -> anyhow::Result<std::path::PathBuf> {
+    let path = weights.join("manifest.json");
+    let mut m: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path)?)
+        .with_context(|| format!("parsing {}", path.display()))?;
+    if !m["metrics"].is_object() {
+        m["metrics"] = json!({});
+    }
+    set(&mut m);
+    let tmp = path.with_extension("json.tmp");
+    std::fs::write(&tmp, serde_json::to_string_pretty(&m)? + "\n")?;
+    std::fs::rename(&tmp, &path)?;
+    Ok(path)
 }
 
 /// Most parts `eval shape` evaluates (each costs a 64³ decode and its ground truth).
@@ -532,6 +544,22 @@ pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
         }
     }
     println!("  mean SDF L1 {l1:.5} (normalised units)");
+    let summary = json!({
+        "format": "physnap.eval_shape/v1",
+        "split": a.split,
+        "parts": parts.len(),
+        "resolution": a.resolution,
+        "mean_iou": mean(&all),
+        "l1": l1,
+        "groups": groups.iter().map(|(name, sel)| json!({
+            "name": name, "parts": sel.len(), "mean_iou": mean(sel),
+        })).collect::<Vec<_>>(),
+        "command": std::env::args().collect::<Vec<_>>().join(" "),
+    });
+    if a.write_manifest {
+        let path = record_in_manifest(&a.weights, |m| m["metrics"]["shape"] = summary.clone())?;
+        println!("metrics recorded in {} (metrics.shape)", path.display());
+    }
     if let Some(out) = &a.out {
         let doc = json!({
             "format": "physnap.eval_shape/v1",
@@ -549,6 +577,7 @@ pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
                 "key": p.key, "iou": p.iou, "primitives": p.primitives, "thinnest": p.thinnest,
             })).collect::<Vec<_>>(),
             "seconds": started.elapsed().as_secs_f64(),
+            "command": summary["command"],
         });
         std::fs::write(out, serde_json::to_string_pretty(&doc)?)
             .with_context(|| format!("writing {}", out.display()))?;

@@ -112,6 +112,10 @@ struct EvalShapeArgs {
     /// Also write the report (with every part) as JSON here.
     #[arg(long, env = "PHYSNAP_EVAL_OUT")]
     out: Option<PathBuf>,
+    /// Record the summary (no per-part list) under `metrics.shape` in the weights'
+    /// manifest.json.
+    #[arg(long, env = "PHYSNAP_EVAL_WRITE_MANIFEST")]
+    write_manifest: bool,
 }
 
 #[derive(Args, Debug)]

@@ -342,6 +342,7 @@ fn synth_import_train_generate() {
         "16",
         "--out",
         s(&report),
+        "--write-manifest",
     ]);
     assert!(out.contains("mean IoU"), "{out}");
     let r: serde_json::Value =
@@ -359,6 +360,11 @@ fn synth_import_train_generate() {
         (0.0..=1.0).contains(&mean) && (mean - by_hand).abs() < 1e-12,
         "{r}"
     );
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(weights.join("manifest.json")).unwrap())
+            .unwrap();
+    assert_eq!(m["metrics"]["shape"]["mean_iou"], r["mean_iou"], "{m:#}");
+    assert_eq!(m["metrics"]["shape"]["parts"], parts.len());
     for (flag, value, expect) in [
         ("--split", "holdout", "invalid --split \"holdout\""),
         ("--parts", "0", "invalid --parts 0: must be between 1 and"),

@@ -262,6 +262,9 @@ struct ShapeArgs {
     /// SDF queries per part and step, half uniform and half near-surface (default 2048).
     #[arg(long, env = "PHYSNAP_SHAPE_QUERIES_PER_PART")]
     queries_per_part: Option<usize>,
+    /// Share of the queries drawn near the surface (default 0.5, as NAP; the rest uniform).
+    #[arg(long, env = "PHYSNAP_SHAPE_NEAR_FRACTION")]
+    near_fraction: Option<f64>,
     /// Encoder input points per part (default 512).
     #[arg(long, env = "PHYSNAP_SHAPE_SURFACE_POINTS")]
     surface_points: Option<usize>,

@@ -46,6 +46,7 @@ pub fn shape(a: ShapeArgs) -> anyhow::Result<()> {
             ..m
         },
         queries_per_part: a.queries_per_part.unwrap_or(defaults.queries_per_part),
+        near_fraction: a.near_fraction.unwrap_or(defaults.near_fraction),
         surface_points: a.surface_points.unwrap_or(defaults.surface_points),
         lr: a.lr.unwrap_or(defaults.lr),
         lr_final_factor: a.lr_final_factor.unwrap_or(defaults.lr_final_factor),

@@ -9,9 +9,10 @@
 //!   plus up to `val_parts` validation parts spread evenly over the val split, whose ground-truth
 //!   occupancy on the IoU grid is computed once (analytic primitives when the part has them,
 //!   otherwise the generalised winding number of `part<k>.obj`);
-//! - each step draws `batch_parts` parts (shuffled epochs), `queries_per_part / 2` uniform and
-//!   as many near-surface samples per part (with replacement, as NAP does) and `surface_points`
-//!   encoder points (without replacement when the part has enough); loss =
+//! - each step draws `batch_parts` parts (shuffled epochs), `queries_per_part` samples per
+//!   part — a `near_fraction` share (default ½, as NAP) near-surface, the rest uniform, with
+//!   replacement as NAP does — and `surface_points` encoder points (without replacement when
+//!   the part has enough); loss =
 //!   mean |f̂ − f| + w_reg · mean(z²), optionally truncated to the band [−δ, δ];
 //! - Adam with a cosine decay from `lr` to `lr · lr_final_factor`;
 //! - every `eval_every` steps and at the end: mean IoU of `SDF < 0` against ground truth on a
@@ -73,12 +74,13 @@ pub const CHECKPOINT_FORMAT: &str = "physnap.shape_checkpoint/v1";
 /// The config fields a resumed run must share with its checkpoint (they define the run's
 /// batches, schedule and model); the others (threads, evaluation, checkpointing, the decoder's
 /// backward implementation) may change between pieces.
-const RESUME_FIELDS: [&str; 11] = [
+const RESUME_FIELDS: [&str; 12] = [
     "model",
     "max_parts",
     "steps",
     "batch_parts",
     "queries_per_part",
+    "near_fraction",
     "surface_points",
     "lr",
     "lr_final_factor",
@@ -100,8 +102,11 @@ pub struct ShapeTrainConfig {
     pub steps: usize,
     /// Parts per step.
     pub batch_parts: usize,
-    /// SDF queries per part and step: half uniform, half near-surface (even).
+    /// SDF queries per part and step, uniform and near-surface (even).
     pub queries_per_part: usize,
+    /// Share of the queries drawn from the near-surface samples (NAP: 0.5); the rest are
+    /// uniform. More near-surface queries spend the batch where the walls are.
+    pub near_fraction: f64,
     /// Encoder input points per part.
     pub surface_points: usize,
     /// Adam learning rate at step 0.
@@ -165,6 +170,7 @@ impl Default for ShapeTrainConfig {
             steps: 10_000,
             batch_parts: 16,
             queries_per_part: 2048,
+            near_fraction: 0.5,
             surface_points: 512,
             lr: 1e-3,
             lr_final_factor: 0.1,
@@ -205,8 +211,15 @@ impl ShapeTrainConfig {
         if !self.queries_per_part.is_multiple_of(2) {
             return Err(TrainError::config(
                 "queries_per_part",
-                "even (half uniform, half near-surface)",
+                "even (the val L1 uses half uniform, half near-surface)",
                 self.queries_per_part,
+            ));
+        }
+        if !(self.near_fraction.is_finite() && (0.0..=1.0).contains(&self.near_fraction)) {
+            return Err(TrainError::config(
+                "near_fraction",
+                "between 0 and 1",
+                self.near_fraction,
             ));
         }
         range("surface_points", self.surface_points, 1, 1 << 16)?;
@@ -233,6 +246,12 @@ impl ShapeTrainConfig {
         Ok(())
     }
 
+    /// Near-surface queries per part and step: `queries_per_part · near_fraction`, rounded
+    /// (the default 0.5 gives exactly half, as NAP).
+    pub fn near_queries(&self) -> usize {
+        (self.queries_per_part as f64 * self.near_fraction).round() as usize
+    }
+
     /// Learning rate at `step` (0-based): cosine from `lr` to `lr · lr_final_factor`.
     pub fn lr_at(&self, step: usize) -> f64 {
         let t = if self.steps > 1 {
@@ -251,6 +270,7 @@ impl ShapeTrainConfig {
             "steps": self.steps,
             "batch_parts": self.batch_parts,
             "queries_per_part": self.queries_per_part,
+            "near_fraction": self.near_fraction,
             "surface_points": self.surface_points,
             "lr": self.lr,
             "lr_final_factor": self.lr_final_factor,
@@ -591,11 +611,12 @@ fn sample_batch(
     let mut tgt = Vec::with_capacity(b * q);
     let mut surf = Vec::with_capacity(b * s * 3);
     let mut idx: Vec<usize> = Vec::new();
+    let near = cfg.near_queries();
     for &pi in order {
         let part = &parts[pi];
-        for rows in [&part.uniform, &part.near] {
+        for (rows, count) in [(&part.uniform, q - near), (&part.near, near)] {
             let n = rows.len() / 4;
-            for _ in 0..q / 2 {
+            for _ in 0..count {
                 let r = rng.int(0, n - 1);
                 pts.extend_from_slice(&rows[4 * r..4 * r + 3]);
                 tgt.push(rows[4 * r + 3]);
@@ -1987,6 +2008,46 @@ mod tests {
         let (a, s) = l1_upstream(0.3, 0.5, None);
         assert!((a - 0.2).abs() < 1e-6 && s == -1.0, "{a} {s}");
         assert_eq!(l1_upstream(0.5, 0.5, None), (0.0, 0.0));
+    }
+
+    /// `near_fraction` sets how many of a part's queries come from its near-surface samples
+    /// (here tagged by their target: uniform rows 1, near rows −1); the default is NAP's half.
+    #[test]
+    fn near_fraction_sets_the_share_of_near_surface_queries() {
+        let part = PartSamples {
+            uniform: [0.1, 0.2, 0.3, 1.0].repeat(10),
+            near: [0.0, 0.0, 0.0, -1.0].repeat(10),
+            surface: [0.0; 3].repeat(8),
+        };
+        let parts = [part];
+        for (fraction, near) in [(0.5, 32), (0.75, 48), (1.0, 64), (0.0, 0)] {
+            let cfg = ShapeTrainConfig {
+                queries_per_part: 64,
+                surface_points: 8,
+                near_fraction: fraction,
+                ..ShapeTrainConfig::default()
+            };
+            cfg.validate().unwrap();
+            assert_eq!(cfg.near_queries(), near);
+            let batch = sample_batch(&parts, &[0, 0], &cfg, &mut Rng::new(1));
+            assert_eq!(batch.tgt.len(), 128);
+            assert_eq!(
+                batch.tgt.iter().filter(|&&t| t < 0.0).count(),
+                2 * near,
+                "fraction {fraction}"
+            );
+        }
+        let err = ShapeTrainConfig {
+            near_fraction: 1.5,
+            ..ShapeTrainConfig::default()
+        }
+        .validate()
+        .unwrap_err()
+        .to_string();
+        assert!(
+            err.contains("near_fraction") && err.contains("between 0 and 1") && err.contains("1.5"),
+            "{err}"
+        );
     }
 
     #[test]

@@ -448,27 +448,31 @@ fn synth_import_train_generate() {
 fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     let root = tempfile::tempdir().unwrap();
     let out = root.path().join("repro");
-    let o = Command::new("bash")
-        .arg(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/scripts/reproduce-weights.sh"
-        ))
-        .arg(&out)
-        .env("PHYSNAP_BIN", env!("CARGO_BIN_EXE_physnap"))
-        .env("PHYSNAP_LOG", "warn")
-        .env("OBJECTS", "26")
-        .env("SHAPE_STEPS", "4")
-        .env("STAGE1", "2")
-        .env("STAGE2", "3")
-        .env("STEPS", "5")
-        .env("BATCH_OBJECTS", "2")
-        .env("CHECKPOINT_EVERY", "1")
-        .env("IMPORT_FLAGS", "--uniform 256 --near 256 --surface 64")
-        .env("SHAPE_FLAGS", "--batch-parts 4")
-        .env("DENOISER_FLAGS", "--width 32 --layers 1")
-        .env("EVAL", "0")
-        .output()
-        .unwrap();
+    // The script at toy scale into `out`, with `stages` = (STAGE1, STAGE2, STEPS).
+    let repro = |out: &Path, stages: [&str; 3]| -> Output {
+        Command::new("bash")
+            .arg(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/scripts/reproduce-weights.sh"
+            ))
+            .arg(out)
+            .env("PHYSNAP_BIN", env!("CARGO_BIN_EXE_physnap"))
+            .env("PHYSNAP_LOG", "warn")
+            .env("OBJECTS", "26")
+            .env("SHAPE_STEPS", "4")
+            .env("STAGE1", stages[0])
+            .env("STAGE2", stages[1])
+            .env("STEPS", stages[2])
+            .env("BATCH_OBJECTS", "2")
+            .env("CHECKPOINT_EVERY", "1")
+            .env("IMPORT_FLAGS", "--uniform 256 --near 256 --surface 64")
+            .env("SHAPE_FLAGS", "--batch-parts 4")
+            .env("DENOISER_FLAGS", "--width 32 --layers 1")
+            .env("EVAL", "0")
+            .output()
+            .unwrap()
+    };
+    let o = repro(&out, ["2", "3", "5"]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     // The three stages ran in order: stage 2 stopped at 3, stage 3 resumed there.
@@ -515,26 +519,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
 
     // STAGE2=0: two denoiser runs, the second resuming at STAGE1 and running to STEPS.
     let two = root.path().join("two");
-    let o = Command::new("bash")
-        .arg(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/scripts/reproduce-weights.sh"
-        ))
-        .arg(&two)
-        .env("PHYSNAP_BIN", env!("CARGO_BIN_EXE_physnap"))
-        .env("PHYSNAP_LOG", "warn")
-        .env("OBJECTS", "26")
-        .env("SHAPE_STEPS", "2")
-        .env("STAGE1", "2")
-        .env("STAGE2", "0")
-        .env("STEPS", "4")
-        .env("BATCH_OBJECTS", "2")
-        .env("IMPORT_FLAGS", "--uniform 256 --near 256 --surface 64")
-        .env("SHAPE_FLAGS", "--batch-parts 4")
-        .env("DENOISER_FLAGS", "--width 32 --layers 1")
-        .env("EVAL", "0")
-        .output()
-        .unwrap();
+    let o = repro(&two, ["2", "0", "4"]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     assert_eq!(err.matches("+ physnap train diffusion").count(), 2, "{err}");

@@ -184,18 +184,45 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
 
     eprintln!("loading {} reference objects (test split)…", a.refs);
     let refs = references(&a.data, a.refs, a.seed)?;
-    let ref_cats: Vec<String> = refs.iter().map(|r| r.0.clone()).collect();
     let ref_clouds: Vec<StateClouds> = refs
         .par_iter()
         .enumerate()
         .map(|(k, (_, o, m))| state_clouds(o, m, &id, a.seed ^ (k as u64) << 20))
         .collect::<Result<_, _>>()?;
 
-    // Conditional runs: every category present among the references.
-    let mut cats: Vec<String> = ref_cats.clone();
+    let conditional = a.per_category > 0 && models.manifest.denoiser.config.categories > 0;
+    // Category accuracy searches its own reference set: the whole test split by default.
+    let cat_refs = if !conditional {
+        Vec::new()
+    } else if a.category_refs == a.refs {
+        refs.iter()
+            .map(|r| r.0.clone())
+            .zip(ref_clouds.clone())
+            .collect()
+    } else {
+        let n = if a.category_refs == 0 {
+            usize::MAX
+        } else {
+            a.category_refs
+        };
+        let objs = references(&a.data, n, a.seed)?;
+        eprintln!("category accuracy against {} test objects…", objs.len());
+        objs.par_iter()
+            .enumerate()
+            .map(|(k, (c, o, m))| {
+                Ok((
+                    c.clone(),
+                    state_clouds(o, m, &id, a.seed ^ (k as u64) << 20)?,
+                ))
+            })
+            .collect::<anyhow::Result<Vec<(String, StateClouds)>>>()?
+    };
+    let (cat_ref_cats, cat_ref_clouds): (Vec<String>, Vec<StateClouds>) =
+        cat_refs.into_iter().unzip();
+    // Conditional runs: every category among the category references.
+    let mut cats: Vec<String> = cat_ref_cats.clone();
     cats.sort();
     cats.dedup();
-    let conditional = a.per_category > 0 && models.manifest.denoiser.config.categories > 0;
     let total_samples = a.samples
         + if conditional {
             cats.len() * a.per_category
@@ -266,7 +293,8 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
     let pairs = gen_clouds.len() * ref_clouds.len()
         + gen_clouds.len() * gen_clouds.len().saturating_sub(1) / 2
         + ref_clouds.len() * ref_clouds.len().saturating_sub(1) / 2
-        + cond_clouds.len() * ref_clouds.len();
+        + cond_clouds.len() * cat_ref_clouds.len()
+        + cat_ref_clouds.len() * cat_ref_clouds.len().saturating_sub(1) / 2;
     let pb = super::progress_bar(pairs, "ID pairs");
     let done = AtomicUsize::new(0);
     let tick = |n: usize| {
@@ -279,7 +307,8 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
     let d_gr = distance_matrix(&gen_clouds, &ref_clouds, false, &tick);
     let d_gg = distance_matrix(&gen_clouds, &gen_clouds, true, &tick);
     let d_rr = distance_matrix(&ref_clouds, &ref_clouds, true, &tick);
-    let d_cr = distance_matrix(&cond_clouds, &ref_clouds, false, &tick);
+    let d_cr = distance_matrix(&cond_clouds, &cat_ref_clouds, false, &tick);
+    let d_cc = distance_matrix(&cat_ref_clouds, &cat_ref_clouds, true, &tick);
     pb.finish_and_clear();
     let id_s = t_id.elapsed().as_secs_f64();
 
@@ -302,7 +331,7 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
             .find(|e| &e.0 == c)
             .expect("known category");
         e.2 += 1;
-        if &ref_cats[nn] == c {
+        if &cat_ref_cats[nn] == c {
             e.1 += 1;
         }
     }
@@ -314,9 +343,9 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
     }
     let (hits, tries) = per_cat.iter().fold((0, 0), |s, e| (s.0 + e.1, s.1 + e.2));
     let cat_acc = (tries > 0).then(|| hits as f64 / tries as f64);
-    // The ceiling of that metric: how often a test object's nearest other test object shares
-    // its category.
-    let ref_acc = physnap::eval::generative::loo_label_accuracy(&d_rr, &ref_cats);
+    // The ceiling of that metric: how often a test object's nearest other test object (among
+    // the category references) shares its category.
+    let ref_acc = physnap::eval::generative::loo_label_accuracy(&d_cc, &cat_ref_cats);
 
     println!(
         "generative evaluation ({} order) of {}",
@@ -363,7 +392,8 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
     }
     if let Some(acc) = cat_acc {
         println!(
-            "  category accuracy (nearest test object has the requested category): {:.1}% ({hits}/{tries})",
+            "  category accuracy (nearest of {} test objects has the requested category): {:.1}% ({hits}/{tries})",
+            cat_ref_cats.len(),
             100.0 * acc
         );
         println!(
@@ -413,6 +443,7 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
             "valid": cond_valid.len(),
             "accuracy": cat_acc,
             "reference_loo_accuracy": ref_acc,
+            "references": cat_ref_cats.len(),
             "categories": per_cat.iter().map(|(c, h, t)| json!({"category": c, "hits": h, "samples": t})).collect::<Vec<_>>(),
         },
         "seconds": { "sampling": sampling_s, "id": id_s, "total": wall },

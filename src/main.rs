@@ -132,9 +132,13 @@ struct EvalGenerativeArgs {
     /// Reference (test-split) objects, chosen by the seed.
     #[arg(long, env = "PHYSNAP_EVAL_REFS", default_value_t = 64)]
     refs: usize,
-    /// Category-conditioned samples per category present among the references (0: skip).
+    /// Category-conditioned samples per category of the test split (0: skip).
     #[arg(long, env = "PHYSNAP_EVAL_PER_CATEGORY", default_value_t = 6)]
     per_category: usize,
+    /// Test objects a conditioned sample's nearest neighbour is searched among for the category
+    /// accuracy (seeded choice); 0: the whole test split, the "nearest test object".
+    #[arg(long, env = "PHYSNAP_EVAL_CATEGORY_REFS", default_value_t = 0)]
+    category_refs: usize,
     /// Joint states per object for the instantiation distance (method.md: 10).
     #[arg(long, env = "PHYSNAP_EVAL_STATES", default_value_t = 4)]
     states: usize,

@@ -46,7 +46,8 @@ fn synth_import_train_generate() {
         "--out",
         s(&synth),
         "--objects",
-        "26",
+        // Three per category: every category gets a val and a test object.
+        "39",
         "--seed",
         "4",
     ]);
@@ -334,8 +335,6 @@ fn synth_import_train_generate() {
         s(&weights),
         "--data",
         s(&data),
-        "--split",
-        "train",
         "--parts",
         "3",
         "--resolution",
@@ -349,7 +348,7 @@ fn synth_import_train_generate() {
         serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
     let parts = r["parts"].as_array().unwrap();
     assert!((1..=3).contains(&parts.len()), "{r}");
-    assert_eq!(r["split"], "train");
+    assert_eq!(r["split"], "val");
     let mean = r["mean_iou"].as_f64().unwrap();
     let by_hand = parts
         .iter()
@@ -365,6 +364,44 @@ fn synth_import_train_generate() {
             .unwrap();
     assert_eq!(m["metrics"]["shape"]["mean_iou"], r["mean_iou"], "{m:#}");
     assert_eq!(m["metrics"]["shape"]["parts"], parts.len());
+    // `eval generative` at toy scale: category accuracy searches the whole test split.
+    let report = root.path().join("generative.json");
+    let out = ok(&[
+        "eval",
+        "generative",
+        "--weights",
+        s(&weights),
+        "--data",
+        s(&data),
+        "--samples",
+        "2",
+        "--refs",
+        "2",
+        "--per-category",
+        "1",
+        "--states",
+        "1",
+        "--points",
+        "32",
+        "--resolution",
+        "16",
+        "--out",
+        s(&report),
+    ]);
+    assert!(
+        out.contains("MMD") && out.contains("category accuracy"),
+        "{out}"
+    );
+    let g: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let index: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(data.join("dataset.json")).unwrap()).unwrap();
+    let test_split = index["splits"]["test"].as_array().unwrap().len();
+    assert_eq!(g["references"], 2, "{g:#}");
+    assert_eq!(g["conditional"]["references"], test_split, "{g:#}");
+    assert_eq!(g["unconditional"]["samples"], 2, "{g:#}");
+    let acc = g["conditional"]["accuracy"].as_f64().unwrap();
+    assert!((0.0..=1.0).contains(&acc), "{g:#}");
     for (flag, value, expect) in [
         ("--split", "holdout", "invalid --split \"holdout\""),
         ("--parts", "0", "invalid --parts 0: must be between 1 and"),

@@ -192,9 +192,10 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
 
     let conditional = a.per_category > 0 && models.manifest.denoiser.config.categories > 0;
     // Category accuracy searches its own reference set: the whole test split by default.
+    let same_refs = conditional && a.category_refs == a.refs;
     let cat_refs = if !conditional {
         Vec::new()
-    } else if a.category_refs == a.refs {
+    } else if same_refs {
         refs.iter()
             .map(|r| r.0.clone())
             .zip(ref_clouds.clone())
@@ -294,7 +295,11 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
         + gen_clouds.len() * gen_clouds.len().saturating_sub(1) / 2
         + ref_clouds.len() * ref_clouds.len().saturating_sub(1) / 2
         + cond_clouds.len() * cat_ref_clouds.len()
-        + cat_ref_clouds.len() * cat_ref_clouds.len().saturating_sub(1) / 2;
+        + if same_refs {
+            0
+        } else {
+            cat_ref_clouds.len() * cat_ref_clouds.len().saturating_sub(1) / 2
+        };
     let pb = super::progress_bar(pairs, "ID pairs");
     let done = AtomicUsize::new(0);
     let tick = |n: usize| {
@@ -308,7 +313,11 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
     let d_gg = distance_matrix(&gen_clouds, &gen_clouds, true, &tick);
     let d_rr = distance_matrix(&ref_clouds, &ref_clouds, true, &tick);
     let d_cr = distance_matrix(&cond_clouds, &cat_ref_clouds, false, &tick);
-    let d_cc = distance_matrix(&cat_ref_clouds, &cat_ref_clouds, true, &tick);
+    let d_cc = if same_refs {
+        d_rr.clone()
+    } else {
+        distance_matrix(&cat_ref_clouds, &cat_ref_clouds, true, &tick)
+    };
     pb.finish_and_clear();
     let id_s = t_id.elapsed().as_secs_f64();
 
@@ -532,33 +541,18 @@ pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
         (!sel.is_empty()).then(|| sel.iter().map(|p| p.iou).sum::<f64>() / sel.len() as f64)
     };
     let all: Vec<&PartIou> = parts.iter().collect();
+    let pick = |keep: &dyn Fn(&PartIou) -> bool| -> Vec<&PartIou> {
+        all.iter().copied().filter(|p| keep(p)).collect()
+    };
     let groups: [(&str, Vec<&PartIou>); 5] = [
         ("all", all.clone()),
-        (
-            "single primitive",
-            all.iter()
-                .copied()
-                .filter(|p| p.primitives == Some(1))
-                .collect(),
-        ),
+        ("single primitive", pick(&|p| p.primitives == Some(1))),
         (
             "several primitives",
-            all.iter()
-                .copied()
-                .filter(|p| p.primitives.is_some_and(|n| n > 1))
-                .collect(),
+            pick(&|p| p.primitives.is_some_and(|n| n > 1)),
         ),
-        (
-            "mesh",
-            all.iter()
-                .copied()
-                .filter(|p| p.primitives.is_none())
-                .collect(),
-        ),
-        (
-            "thinner than a grid cell",
-            all.iter().copied().filter(|p| p.thinnest < cell).collect(),
-        ),
+        ("mesh", pick(&|p| p.primitives.is_none())),
+        ("thinner than a grid cell", pick(&|p| p.thinnest < cell)),
     ];
     println!(
         "shape prior of {}: {} {} parts of {}, {}³ grid (cell {cell:.4}), {:.0} s",
@@ -592,24 +586,20 @@ pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
         println!("metrics recorded in {} (metrics.shape)", path.display());
     }
     if let Some(out) = &a.out {
-        let doc = json!({
-            "format": "physnap.eval_shape/v1",
-            "weights": a.weights.display().to_string(),
-            "data": a.data.display().to_string(),
-            "split": a.split,
-            "resolution": a.resolution,
-            "surface_points": surface_points,
-            "mean_iou": mean(&all),
-            "l1": l1,
-            "groups": groups.iter().map(|(name, sel)| json!({
-                "name": name, "parts": sel.len(), "mean_iou": mean(sel),
-            })).collect::<Vec<_>>(),
-            "parts": parts.iter().map(|p| json!({
-                "key": p.key, "iou": p.iou, "primitives": p.primitives, "thinnest": p.thinnest,
-            })).collect::<Vec<_>>(),
-            "seconds": started.elapsed().as_secs_f64(),
-            "command": summary["command"],
-        });
+        // The summary, with every part instead of their count.
+        let mut doc = summary;
+        doc["weights"] = json!(a.weights.display().to_string());
+        doc["data"] = json!(a.data.display().to_string());
+        doc["surface_points"] = json!(surface_points);
+        doc["parts"] = parts
+            .iter()
+            .map(|p| {
+                json!({
+                    "key": p.key, "iou": p.iou, "primitives": p.primitives, "thinnest": p.thinnest,
+                })
+            })
+            .collect();
+        doc["seconds"] = json!(started.elapsed().as_secs_f64());
         std::fs::write(out, serde_json::to_string_pretty(&doc)?)
             .with_context(|| format!("writing {}", out.display()))?;
         println!("report: {}", out.display());

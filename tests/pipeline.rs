@@ -29,6 +29,14 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
+/// Corrupt a weights file: flip one byte near its end.
+fn flip_byte(path: &Path) {
+    let mut bytes = std::fs::read(path).unwrap();
+    let n = bytes.len();
+    bytes[n - 3] ^= 0xFF;
+    std::fs::write(path, bytes).unwrap();
+}
+
 #[test]
 fn synth_import_train_generate() {
     let root = tempfile::tempdir().unwrap();
@@ -444,10 +452,7 @@ fn synth_import_train_generate() {
 
     // A corrupted weights file is refused with a checksum error.
     let w = weights.join("denoiser.safetensors");
-    let mut bytes = std::fs::read(&w).unwrap();
-    let n = bytes.len();
-    bytes[n - 3] ^= 0xFF;
-    std::fs::write(&w, bytes).unwrap();
+    flip_byte(&w);
     let o = physnap(&["generate", "--weights", s(&weights), "--out", s(&gen1)]);
     assert!(!o.status.success());
     let e = String::from_utf8_lossy(&o.stderr);
@@ -457,10 +462,7 @@ fn synth_import_train_generate() {
     );
     // So is a corrupted shape prior, by `train encode`.
     let w = weights.join("shape_prior.safetensors");
-    let mut bytes = std::fs::read(&w).unwrap();
-    let n = bytes.len();
-    bytes[n - 3] ^= 0xFF;
-    std::fs::write(&w, bytes).unwrap();
+    flip_byte(&w);
     let o = physnap(&[
         "train",
         "encode",

@@ -1673,27 +1673,23 @@ mod tests {
             cfg.model
         );
         // A report without the encoder input size, or weights of another size, are refused.
+        let refused = |report: &Value| {
+            encode_shape_dir(
+                &out.join(WEIGHTS_FILE),
+                report,
+                &data.path().join("train"),
+                &again,
+            )
+            .unwrap_err()
+            .to_string()
+        };
         let mut no_points = report_doc.clone();
         no_points["config"]["surface_points"] = Value::Null;
-        let err = encode_shape_dir(
-            &out.join(WEIGHTS_FILE),
-            &no_points,
-            &data.path().join("train"),
-            &again,
-        )
-        .unwrap_err()
-        .to_string();
+        let err = refused(&no_points);
         assert!(err.contains("surface_points"), "{err}");
         let mut wider = report_doc;
         wider["config"]["model"]["decoder_hidden"] = json!(cfg.model.decoder_hidden * 2);
-        let err = encode_shape_dir(
-            &out.join(WEIGHTS_FILE),
-            &wider,
-            &data.path().join("train"),
-            &again,
-        )
-        .unwrap_err()
-        .to_string();
+        let err = refused(&wider);
         assert!(
             err.contains(WEIGHTS_FILE) && err.contains("decoder.fc_p.weight"),
             "{err}"

@@ -1,6 +1,8 @@
 //! `physnap eval generative`: sample the trained prior, compare the samples with the held-out
 //! test split by instantiation distance, and print validity, MMD / COV / 1-NNA and the
-//! category accuracy of conditioned samples (issue 4's quality targets).
+//! category accuracy of conditioned samples (issue 4's quality targets). Also `eval shape`
+//! (the shape prior's IoU) and `eval reconstruction` (test objects through the representation
+//! against the originals: what the shape prior alone loses, and so bounds).
 
 use std::ops::ControlFlow;
 use std::path::Path;
@@ -24,7 +26,7 @@ use physnap::io::manifest::{LoadedModels, load_models};
 use physnap::mesh::MeshingOptions;
 use physnap::model::shape_prior::LatentSdfDecoder;
 
-use super::{EvalGenerativeArgs, EvalShapeArgs};
+use super::{EvalGenerativeArgs, EvalReconstructionArgs, EvalShapeArgs};
 
 /// The imported data set's `dataset.json`, with its path for error messages.
 fn read_index(data: &Path) -> anyhow::Result<(std::path::PathBuf, serde_json::Value)> {
@@ -49,6 +51,18 @@ fn references(
         Vec<physnap::mesh::TriMesh>,
     )>,
 > {
+    let ids = test_ids(data, n, seed)?;
+    ids.par_iter()
+        .map(|id| {
+            let (obj, meshes) = load_object_meshes(&data.join("objects").join(id))?;
+            let cat = obj.category.clone().unwrap_or_default();
+            Ok((cat, obj, meshes))
+        })
+        .collect()
+}
+
+/// Ids of `n` test-split objects (seeded choice, sorted; all of them when n ≥ the split).
+fn test_ids(data: &Path, n: usize, seed: u64) -> anyhow::Result<Vec<String>> {
     let (index_path, index) = read_index(data)?;
     let mut ids: Vec<String> = index["splits"]["test"]
         .as_array()
@@ -65,13 +79,7 @@ fn references(
     }
     ids.truncate(n);
     ids.sort();
-    ids.par_iter()
-        .map(|id| {
-            let (obj, meshes) = load_object_meshes(&data.join("objects").join(id))?;
-            let cat = obj.category.clone().unwrap_or_default();
-            Ok((cat, obj, meshes))
-        })
-        .collect()
+    Ok(ids)
 }
 
 /// Per-cloud references of the guided table's MMD / 1-NNA (our reading of "per point cloud",
@@ -468,11 +476,16 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
         println!("  metrics recorded in {}", path.display());
     }
     if let Some(out) = &a.out {
-        std::fs::write(out, serde_json::to_string_pretty(&report)? + "\n")
-            .with_context(|| format!("writing {}", out.display()))?;
+        write_report(out, &report)?;
         println!("  report: {}", out.display());
     }
     Ok(())
+}
+
+/// Write an evaluation report as pretty JSON (with a final newline) to `out`.
+fn write_report(out: &Path, doc: &serde_json::Value) -> anyhow::Result<()> {
+    std::fs::write(out, serde_json::to_string_pretty(doc)? + "\n")
+        .with_context(|| format!("writing {}", out.display()))
 }
 
 /// Record evaluation figures in `weights/manifest.json` under `metrics` (`set` edits the parsed
@@ -498,6 +511,279 @@ fn record_in_manifest(
 /// Most parts `eval shape` evaluates (each costs a 64³ decode and its ground truth).
 const MAX_SHAPE_PARTS: usize = 5000;
 
+/// `physnap eval reconstruction`: test objects passed through the representation the denoiser
+/// learns (their `graph.npy`, each part's code from the shape prior's encoder, projection,
+/// meshing with the decoder), compared with the originals by instantiation distance.
+///
+/// Why: it separates what the shape prior and the representation lose from what the denoiser
+/// loses. Its category accuracy is what a conditioned sample could reach if the denoiser
+/// reproduced test objects exactly; if it is far below the originals' own leave-one-out figure,
+/// no denoiser can meet the category target with this shape prior.
+pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
+    use physnap::eval::generative::{loo_label_accuracy, reconstruction_nn};
+    use physnap::graph::{GraphTensor, ProjectOptions, node_ch, project};
+    use physnap::train::shape::encode_object_parts;
+    let started = Instant::now();
+    if !["encoded", "original"].contains(&a.shapes.as_str()) {
+        bail!(
+            "invalid --shapes {:?} (must be encoded or original)",
+            a.shapes
+        );
+    }
+    let id = IdOptions {
+        states: a.states,
+        points: a.points,
+    };
+    id.validate()?;
+    let meshing = MeshingOptions {
+        resolution: a.resolution,
+    };
+    meshing.validate()?;
+    let (prior, _, report) = load_any_shape_prior(&a.weights)?;
+    let surface_points = report["config"]["surface_points"].as_u64().map_or(
+        physnap::train::shape::ShapeTrainConfig::default().surface_points,
+        |n| n as usize,
+    );
+    let decoder = LatentSdfDecoder::new(&prior.decoder);
+    let n = if a.objects == 0 {
+        usize::MAX
+    } else {
+        a.objects
+    };
+    let ids = test_ids(&a.data, n, a.seed)?;
+    if ids.len() < 2 {
+        bail!(
+            "--objects: need at least 2 test objects, {} has {}",
+            a.data.display(),
+            ids.len()
+        );
+    }
+    let pb = super::progress_bar(ids.len(), "objects");
+    // Per object: category, original clouds, reconstruction (clouds or why not), empty parts.
+    type Rec = (String, StateClouds, Result<StateClouds, String>, usize);
+    let recs: Vec<Rec> = ids
+        .iter()
+        .enumerate()
+        .map(|(k, oid)| -> anyhow::Result<Rec> {
+            let dir = a.data.join("objects").join(oid);
+            let (orig, orig_meshes) = load_object_meshes(&dir)?;
+            let cat = orig.category.clone().unwrap_or_default();
+            let salt = a.seed ^ ((k as u64) << 20);
+            let orig_clouds = state_clouds(&orig, &orig_meshes, &id, salt)?;
+            let graph_path = dir.join("graph.npy");
+            let (_, _, flat) = physnap::io::npy::read(&graph_path)
+                .with_context(|| format!("reading {}", graph_path.display()))?;
+            let mut g = GraphTensor::from_flat(&flat)
+                .with_context(|| format!("{}", graph_path.display()))?;
+            let codes =
+                encode_object_parts(&prior, &a.data, oid, orig.parts.len(), surface_points)?;
+            // Slot k holds part k (the codebook's key `<id>_<k>`, as `train diffusion` reads it).
+            for slot in 0..physnap::graph::K {
+                if g.node(slot)[node_ch::EXIST] >= 0.5 {
+                    let code = codes.get(slot).with_context(|| {
+                        format!(
+                            "{}: node {slot} exists but the object has {} parts",
+                            graph_path.display(),
+                            codes.len()
+                        )
+                    })?;
+                    g.node_mut(slot)[node_ch::LATENT..].copy_from_slice(code);
+                }
+            }
+            // Projection turns every node into a part with its latent code as the shape.
+            let obj = project(
+                &g,
+                &ProjectOptions {
+                    name: oid.clone(),
+                    category: Some(cat.clone()),
+                    ..Default::default()
+                },
+            )
+            .with_context(|| format!("projecting {}", graph_path.display()))?;
+            let meshes = if a.shapes == "original" {
+                if obj.parts.len() != orig_meshes.len() {
+                    bail!(
+                        "{}: the projected graph has {} parts, the object {}",
+                        graph_path.display(),
+                        obj.parts.len(),
+                        orig_meshes.len()
+                    );
+                }
+                orig_meshes.clone()
+            } else {
+                physnap::mesh::mesh_parts(&obj, Some(&decoder), &meshing)?
+            };
+            let empty = meshes.iter().filter(|m| m.triangles.is_empty()).count();
+            // The same seed as the original: the same joint states, so the distance to it is the
+            // shapes' (and the graph's) loss, not state-sampling noise.
+            let rec = state_clouds(&obj, &meshes, &id, salt).map_err(|e| e.to_string());
+            pb.inc(1);
+            Ok((cat, orig_clouds, rec, empty))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    pb.finish_and_clear();
+    let mesh_s = started.elapsed().as_secs_f64();
+
+    let labels: Vec<String> = recs.iter().map(|r| r.0.clone()).collect();
+    let originals: Vec<StateClouds> = recs.iter().map(|r| r.1.clone()).collect();
+    let rows: Vec<usize> = (0..recs.len()).filter(|&i| recs[i].2.is_ok()).collect();
+    let rec_clouds: Vec<StateClouds> = rows
+        .iter()
+        .map(|&i| recs[i].2.clone().expect("kept rows are Ok"))
+        .collect();
+    let objects_with_empty = recs.iter().filter(|r| r.3 > 0).count();
+    let empty_parts: usize = recs.iter().map(|r| r.3).sum();
+
+    let pairs = rec_clouds.len() * originals.len() + originals.len() * (originals.len() - 1) / 2;
+    let pb = super::progress_bar(pairs, "ID pairs");
+    let done = AtomicUsize::new(0);
+    let tick = |k: usize| {
+        let d = done.fetch_add(k, Ordering::Relaxed) + k;
+        if d.is_multiple_of(64) || d == pairs {
+            pb.set_position(d as u64);
+        }
+    };
+    let d_ro = distance_matrix(&rec_clouds, &originals, false, &tick);
+    let d_oo = distance_matrix(&originals, &originals, true, &tick);
+    pb.finish_and_clear();
+    let (cat_hits, self_hits) =
+        reconstruction_nn(&d_ro, &rows, &labels).context("reconstruction distances")?;
+    let ceiling = loo_label_accuracy(&d_oo, &labels);
+    let total = recs.len();
+    let own: Vec<f64> = rows.iter().enumerate().map(|(r, &i)| d_ro[r][i]).collect();
+    let nearest_other: Vec<f64> = (0..total)
+        .map(|i| {
+            (0..total)
+                .filter(|&j| j != i)
+                .map(|j| d_oo[i][j])
+                .fold(f64::INFINITY, f64::min)
+        })
+        .collect();
+    let median = |v: &[f64]| -> Option<f64> {
+        let mut v = v.to_vec();
+        v.sort_by(f64::total_cmp);
+        (!v.is_empty()).then(|| v[v.len() / 2])
+    };
+    let mean = |v: &[f64]| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
+    let mut cats: Vec<String> = labels.clone();
+    cats.sort();
+    cats.dedup();
+    let per_cat: Vec<(String, usize, usize)> = cats
+        .iter()
+        .map(|c| {
+            let of_cat: Vec<usize> = (0..rows.len()).filter(|&r| &labels[rows[r]] == c).collect();
+            let hits = of_cat
+                .iter()
+                .filter(|&&r| {
+                    let i = rows[r];
+                    let nn = (0..total)
+                        .filter(|&j| j != i)
+                        .min_by(|&x, &y| d_ro[r][x].total_cmp(&d_ro[r][y]))
+                        .expect("at least 2 objects");
+                    &labels[nn] == c
+                })
+                .count();
+            let all = labels.iter().filter(|l| *l == c).count();
+            (c.clone(), hits, all)
+        })
+        .collect();
+    let pct = |k: usize| 100.0 * k as f64 / total as f64;
+    if a.shapes == "original" {
+        println!(
+            "reconstruction of {total} test objects: projected graphs with the original meshes ({} states × {} points)",
+            a.states, a.points
+        );
+    } else {
+        println!(
+            "reconstruction of {total} test objects through the shape prior of {} ({} states × {} points, meshing {}³)",
+            a.weights.display(),
+            a.states,
+            a.points,
+            a.resolution
+        );
+    }
+    println!(
+        "  parts meshing empty: {empty_parts} in {objects_with_empty} objects; {} objects without any surface",
+        total - rows.len()
+    );
+    println!(
+        "  category accuracy (nearest other test object has the category): {:.1}% ({cat_hits}/{total}); originals: {:.1}%",
+        pct(cat_hits),
+        100.0 * ceiling.unwrap_or(f64::NAN)
+    );
+    println!(
+        "  nearest test object is the original itself: {:.1}% ({self_hits}/{total})",
+        pct(self_hits)
+    );
+    println!(
+        "  ID reconstruction↔original: mean {:.4}, median {:.4}; original↔nearest other: median {:.4}",
+        mean(&own).unwrap_or(f64::NAN),
+        median(&own).unwrap_or(f64::NAN),
+        median(&nearest_other).unwrap_or(f64::NAN)
+    );
+    for (c, h, t) in &per_cat {
+        println!("    {c:<18} {h}/{t}");
+    }
+    let wall = started.elapsed().as_secs_f64();
+    println!("  time: encode+mesh {mesh_s:.0} s, total {wall:.0} s");
+    if let Some(out) = &a.out {
+        let doc = json!({
+            "format": "physnap.eval_reconstruction/v1",
+            "weights": a.weights.display().to_string(),
+            "data": a.data.display().to_string(),
+            "objects": total,
+            "seed": a.seed,
+            "id": { "states": a.states, "points": a.points },
+            "meshing_resolution": a.resolution,
+            "shapes": a.shapes,
+            "surface_points": surface_points,
+            "empty_parts": empty_parts,
+            "objects_with_empty_parts": objects_with_empty,
+            "objects_without_surface": total - rows.len(),
+            "category_accuracy": cat_hits as f64 / total as f64,
+            "original_loo_accuracy": ceiling,
+            "self_retrieval": self_hits as f64 / total as f64,
+            "id_to_original": { "mean": mean(&own), "median": median(&own) },
+            "original_nearest_other_median": median(&nearest_other),
+            "categories": per_cat.iter().map(|(c, h, t)| json!({"category": c, "hits": h, "objects": t})).collect::<Vec<_>>(),
+            "seconds": { "encode_mesh": mesh_s, "total": wall },
+            "command": std::env::args().collect::<Vec<_>>().join(" "),
+        });
+        write_report(out, &doc)?;
+        println!("  report: {}", out.display());
+    }
+    Ok(())
+}
+
+/// The shape prior of `dir` with its sizes and training report: a weights directory
+/// (`manifest.json`, sha256 checked) or a `train shape` output directory
+/// (`shape_prior.safetensors` + `shape_train.json`), so candidates are measured before a
+/// denoiser is trained on them.
+fn load_any_shape_prior(
+    dir: &Path,
+) -> anyhow::Result<(
+    physnap::model::shape_prior::ShapePrior,
+    physnap::model::shape_prior::ShapePriorConfig,
+    serde_json::Value,
+)> {
+    use physnap::train::shape::{REPORT_FILE, WEIGHTS_FILE, load_shape_prior};
+    if dir.join("manifest.json").is_file() || !dir.join(REPORT_FILE).is_file() {
+        let models = load_models(dir, &physnap::model::cpu())?;
+        let cfg = models.manifest.shape_prior.config;
+        let report = models.manifest.training["shape"].clone();
+        return Ok((models.shape_prior, cfg, report));
+    }
+    let report_path = dir.join(REPORT_FILE);
+    let report: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(&report_path)
+            .with_context(|| format!("reading {}", report_path.display()))?,
+    )
+    .with_context(|| format!("parsing {}", report_path.display()))?;
+    let cfg = physnap::train::shape::read_model_config(&report_path)?;
+    let model = load_shape_prior(&dir.join(WEIGHTS_FILE), &cfg, &physnap::model::cpu())?;
+    Ok((model, cfg, report))
+}
+
 /// `physnap eval shape`: IoU of the weights' shape prior on parts of one split.
 pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
     use physnap::train::shape::{PartIou, ShapeTrainConfig, evaluate_shape_prior};
@@ -511,21 +797,27 @@ pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
             a.parts
         );
     }
-    let models = load_models(&a.weights, &physnap::model::cpu())?;
-    let report = &models.manifest.training["shape"];
+    if a.write_manifest && !a.weights.join("manifest.json").is_file() {
+        bail!(
+            "--write-manifest needs a weights directory with manifest.json; {} has none (drop \
+             --write-manifest, or keep the figures with --out)",
+            a.weights.display()
+        );
+    }
+    let (shape_prior, model_cfg, report) = load_any_shape_prior(&a.weights)?;
     let defaults = ShapeTrainConfig::default();
     let surface_points = report["config"]["surface_points"]
         .as_u64()
         .map_or(defaults.surface_points, |n| n as usize);
     let cfg = ShapeTrainConfig {
-        model: models.manifest.shape_prior.config,
+        model: model_cfg,
         surface_points,
         iou_resolution: a.resolution,
         ..defaults
     };
     let pb = super::progress_bar(a.parts, "parts");
     let (parts, l1) = evaluate_shape_prior(
-        &models.shape_prior,
+        &shape_prior,
         &a.data,
         &cfg,
         &a.split,
@@ -600,8 +892,7 @@ pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
             })
             .collect();
         doc["seconds"] = json!(started.elapsed().as_secs_f64());
-        std::fs::write(out, serde_json::to_string_pretty(&doc)?)
-            .with_context(|| format!("writing {}", out.display()))?;
+        write_report(out, &doc)?;
         println!("report: {}", out.display());
     }
     Ok(())

@@ -90,11 +90,50 @@ enum EvalCommand {
     /// Shape prior IoU (issue 4's "mean IoU on val parts at a 64³ grid"): per part and by kind
     /// (single primitive, several primitives, mesh, thinner than a grid cell), plus SDF L1.
     Shape(EvalShapeArgs),
+    /// Test objects passed through the representation (graph, shape codes from the encoder,
+    /// projection, decoder meshing) against the originals: what the shape prior loses, and
+    /// the category accuracy a perfect denoiser could reach with it.
+    Reconstruction(EvalReconstructionArgs),
+}
+
+#[derive(Args, Debug)]
+struct EvalReconstructionArgs {
+    /// Weights directory with manifest.json, or a `train shape` output directory
+    /// (shape_prior.safetensors + shape_train.json): its shape prior is evaluated.
+    #[arg(long, env = "PHYSNAP_WEIGHTS", default_value = "weights")]
+    weights: PathBuf,
+    /// Imported data set whose test split is reconstructed.
+    #[arg(long, env = "PHYSNAP_DATA")]
+    data: PathBuf,
+    /// Test objects (seeded choice); 0: the whole test split.
+    #[arg(long, env = "PHYSNAP_EVAL_OBJECTS", default_value_t = 0)]
+    objects: usize,
+    /// Joint states per object for the instantiation distance (method.md: 10).
+    #[arg(long, env = "PHYSNAP_EVAL_STATES", default_value_t = 4)]
+    states: usize,
+    /// Surface points per state for the instantiation distance (method.md: 2048).
+    #[arg(long, env = "PHYSNAP_EVAL_POINTS", default_value_t = 256)]
+    points: usize,
+    /// Marching-cubes grid cells per axis for the reconstructions.
+    #[arg(long, env = "PHYSNAP_MC_RESOLUTION", default_value_t = 32)]
+    resolution: usize,
+    /// Seed (object choice, state sampling).
+    #[arg(long, env = "PHYSNAP_SEED", default_value_t = 12345)]
+    seed: u64,
+    /// Part shapes of the reconstructions: encoded (codes from the shape prior's encoder,
+    /// meshed by its decoder) or original (the originals' meshes on the projected graph: what
+    /// the graph representation alone loses, the control).
+    #[arg(long, env = "PHYSNAP_EVAL_SHAPES", default_value = "encoded", value_parser = ["encoded", "original"])]
+    shapes: String,
+    /// Also write the report as JSON here.
+    #[arg(long, env = "PHYSNAP_EVAL_OUT")]
+    out: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
 struct EvalShapeArgs {
-    /// Weights directory with manifest.json (its shape prior is evaluated).
+    /// Weights directory with manifest.json, or a `train shape` output directory
+    /// (shape_prior.safetensors + shape_train.json): its shape prior is evaluated.
     #[arg(long, env = "PHYSNAP_WEIGHTS", default_value = "weights")]
     weights: PathBuf,
     /// Imported data set (output of `physnap data import`).
@@ -785,6 +824,7 @@ fn run(command: Command) -> anyhow::Result<()> {
             EvalCommand::Generative(a) => eval_cmd::generative(a),
             EvalCommand::Guided(a) => model_cmd::eval_guided(*a),
             EvalCommand::Shape(a) => eval_cmd::shape(a),
+            EvalCommand::Reconstruction(a) => eval_cmd::reconstruction(a),
         },
     }
 }

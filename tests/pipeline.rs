@@ -410,6 +410,131 @@ fn synth_import_train_generate() {
     assert_eq!(g["unconditional"]["samples"], 2, "{g:#}");
     let acc = g["conditional"]["accuracy"].as_f64().unwrap();
     assert!((0.0..=1.0).contains(&acc), "{g:#}");
+    // A `train shape` output directory is evaluated as well (a candidate before any denoiser
+    // is trained on it): the same shape prior, the same figures.
+    let report2 = root.path().join("shape_eval_dir.json");
+    ok(&[
+        "eval",
+        "shape",
+        "--weights",
+        s(&shape),
+        "--data",
+        s(&data),
+        "--parts",
+        "3",
+        "--resolution",
+        "16",
+        "--out",
+        s(&report2),
+    ]);
+    let r2: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report2).unwrap()).unwrap();
+    assert_eq!(r2["mean_iou"], m["metrics"]["shape"]["mean_iou"], "{r2:#}");
+    let o = physnap(&[
+        "eval",
+        "shape",
+        "--weights",
+        s(&shape),
+        "--data",
+        s(&data),
+        "--write-manifest",
+    ]);
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        e.contains("--write-manifest needs a weights directory with manifest.json"),
+        "{e}"
+    );
+    // `eval reconstruction`: every test object through the representation, against the
+    // originals.
+    let report = root.path().join("reconstruction.json");
+    let out = ok(&[
+        "eval",
+        "reconstruction",
+        "--weights",
+        s(&weights),
+        "--data",
+        s(&data),
+        "--states",
+        "1",
+        "--points",
+        "32",
+        "--resolution",
+        "16",
+        "--out",
+        s(&report),
+    ]);
+    assert!(out.contains("category accuracy"), "{out}");
+    let rc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(rc["objects"], test_split, "{rc:#}");
+    for k in [
+        "category_accuracy",
+        "self_retrieval",
+        "original_loo_accuracy",
+    ] {
+        let v = rc[k].as_f64().unwrap_or(-1.0);
+        assert!((0.0..=1.0).contains(&v), "{k}: {rc:#}");
+    }
+    let per_cat: u64 = rc["categories"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["objects"].as_u64().unwrap())
+        .sum();
+    assert_eq!(per_cat as usize, test_split, "{rc:#}");
+    assert!(
+        rc["id_to_original"]["mean"].as_f64().unwrap() > 0.0,
+        "{rc:#}"
+    );
+    // The control: the originals' meshes on the projected graphs. The graph representation
+    // loses nothing, so every reconstruction is at distance ≈ 0 from its original and the
+    // category accuracy is the originals' own leave-one-out figure.
+    let report = root.path().join("reconstruction_original.json");
+    ok(&[
+        "eval",
+        "reconstruction",
+        "--weights",
+        s(&weights),
+        "--data",
+        s(&data),
+        "--shapes",
+        "original",
+        "--states",
+        "1",
+        "--points",
+        "32",
+        "--out",
+        s(&report),
+    ]);
+    let rc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    // (0 up to rounding: the graph stores f32.)
+    assert!(
+        rc["id_to_original"]["mean"].as_f64().unwrap() < 1e-9,
+        "{rc:#}"
+    );
+    assert_eq!(rc["self_retrieval"], 1.0, "{rc:#}");
+    assert_eq!(
+        rc["category_accuracy"], rc["original_loo_accuracy"],
+        "{rc:#}"
+    );
+    let o = physnap(&[
+        "eval",
+        "reconstruction",
+        "--weights",
+        s(&weights),
+        "--data",
+        s(&data),
+        "--states",
+        "0",
+    ]);
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        e.contains("states") && e.contains("between 1 and 100"),
+        "{e}"
+    );
     for (flag, value, expect) in [
         ("--split", "holdout", "invalid --split \"holdout\""),
         ("--parts", "0", "invalid --parts 0: must be between 1 and"),

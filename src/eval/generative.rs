@@ -533,10 +533,67 @@ pub fn loo_label_accuracy(d: &[Vec<f64>], labels: &[String]) -> Option<f64> {
     Some(hits as f64 / n as f64)
 }
 
+/// Nearest-neighbour checks of reconstructions. `d[r]` holds the IDs between the
+/// reconstruction of original object `rows[r]` and every original object (columns in the order
+/// of `labels`). Returns the counts (category hits: the nearest original *other than itself*
+/// carries its label — what the category accuracy of a conditioned sample could reach if the
+/// denoiser reproduced test objects exactly; self hits: the nearest original of all is the
+/// object itself). None when a row or index does not fit, or below two originals.
+pub fn reconstruction_nn(
+    d: &[Vec<f64>],
+    rows: &[usize],
+    labels: &[String],
+) -> Option<(usize, usize)> {
+    let n = labels.len();
+    if n < 2 || d.len() != rows.len() || d.iter().any(|row| row.len() != n) {
+        return None;
+    }
+    if rows.iter().any(|&i| i >= n) {
+        return None;
+    }
+    let nearest = |r: usize, skip: Option<usize>| {
+        (0..n)
+            .filter(|&j| Some(j) != skip)
+            .min_by(|&a, &b| d[r][a].total_cmp(&d[r][b]))
+            .expect("n >= 2")
+    };
+    let cat = (0..rows.len())
+        .filter(|&r| labels[nearest(r, Some(rows[r]))] == labels[rows[r]])
+        .count();
+    let own = (0..rows.len())
+        .filter(|&r| nearest(r, None) == rows[r])
+        .count();
+    Some((cat, own))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::mesh::{MeshingOptions, mesh_parts};
+
+    #[test]
+    fn reconstruction_checks_skip_the_object_itself_for_the_category() {
+        // Reconstruction 0 lies nearest its own original, next nearest object 2;
+        // reconstruction 1 lies nearest object 2, then its own; 2 nearest itself, then 1.
+        let d = vec![
+            vec![0.1, 0.9, 0.5],
+            vec![0.8, 0.3, 0.2],
+            vec![0.7, 0.4, 0.0],
+        ];
+        let rows = [0, 1, 2];
+        let labels: Vec<String> = ["a", "a", "b"].map(String::from).to_vec();
+        // Category: 0 → 2 (b ≠ a) miss; 1 → 2 (b ≠ a) miss; 2 → 1 (a ≠ b) miss.
+        // Self: 0 yes, 1 no (2 is nearer), 2 yes.
+        assert_eq!(reconstruction_nn(&d, &rows, &labels), Some((0, 2)));
+        let labels: Vec<String> = ["a", "b", "b"].map(String::from).to_vec();
+        // Category: 0 → 2 miss; 1 → 2 hit; 2 → 1 hit.
+        assert_eq!(reconstruction_nn(&d, &rows, &labels), Some((2, 2)));
+        // Reconstruction 1 missing (it meshed empty): rows name the originals.
+        let d2 = vec![d[0].clone(), d[2].clone()];
+        assert_eq!(reconstruction_nn(&d2, &[0, 2], &labels), Some((1, 2)));
+        assert_eq!(reconstruction_nn(&d2, &[0, 3], &labels), None);
+        assert_eq!(reconstruction_nn(&d[..1], &[0], &labels[..1]), None);
+    }
 
     #[test]
     fn leave_one_out_accuracy_uses_the_nearest_other_object() {

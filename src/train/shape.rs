@@ -840,6 +840,40 @@ pub fn load_shape_prior(
     Ok(model)
 }
 
+/// Codes of parts `0..parts` of object `id` in `data`, encoded as the codebook encodes them
+/// (the first `surface_points` points of each `part<k>_surface.npy`, cycled if fewer), one
+/// encoder call for the object.
+pub fn encode_object_parts(
+    model: &ShapePrior,
+    data: &Path,
+    id: &str,
+    parts: usize,
+    surface_points: usize,
+) -> Result<Vec<Vec<f32>>, TrainError> {
+    if parts == 0 || surface_points == 0 {
+        return Ok(Vec::new());
+    }
+    let mut flat = Vec::with_capacity(parts * surface_points * 3);
+    for k in 0..parts {
+        let p = PartRef {
+            id: id.to_string(),
+            k,
+            split: String::new(),
+        };
+        let (_, pts) = read_rows(&p.file(data, "surface"), 3)?;
+        flat.extend(first_points(&pts, surface_points));
+    }
+    let z = model.encoder.encode(Tensor::from_data(
+        TensorData::new(flat, [parts, surface_points, 3]),
+        &cpu(),
+    ));
+    let latent = z.dims()[1];
+    Ok(to_vec(z)
+        .chunks_exact(latent)
+        .map(<[f32]>::to_vec)
+        .collect())
+}
+
 /// What [`encode_shape_dir`] wrote.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EncodeReport {

@@ -136,6 +136,35 @@ pub fn cloud_references(
         .collect()
 }
 
+/// A progress bar over `total` instantiation-distance pairs, ticked from `distance_matrix`'s
+/// parallel workers.
+struct PairProgress {
+    pb: indicatif::ProgressBar,
+    done: AtomicUsize,
+    total: usize,
+}
+
+impl PairProgress {
+    fn new(total: usize) -> Self {
+        PairProgress {
+            pb: super::progress_bar(total, "ID pairs"),
+            done: AtomicUsize::new(0),
+            total,
+        }
+    }
+
+    fn tick(&self, n: usize) {
+        let d = self.done.fetch_add(n, Ordering::Relaxed) + n;
+        if d.is_multiple_of(64) || d == self.total {
+            self.pb.set_position(d as u64);
+        }
+    }
+
+    fn finish(self) {
+        self.pb.finish_and_clear();
+    }
+}
+
 /// Draw `req.samples` objects for `req` (its category name filled in from the manifest).
 fn sample_set(
     models: &LoadedModels,
@@ -308,14 +337,8 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
         } else {
             cat_ref_clouds.len() * cat_ref_clouds.len().saturating_sub(1) / 2
         };
-    let pb = super::progress_bar(pairs, "ID pairs");
-    let done = AtomicUsize::new(0);
-    let tick = |n: usize| {
-        let d = done.fetch_add(n, Ordering::Relaxed) + n;
-        if d.is_multiple_of(64) || d == pairs {
-            pb.set_position(d as u64);
-        }
-    };
+    let progress = PairProgress::new(pairs);
+    let tick = |n: usize| progress.tick(n);
     let t_id = Instant::now();
     let d_gr = distance_matrix(&gen_clouds, &ref_clouds, false, &tick);
     let d_gg = distance_matrix(&gen_clouds, &gen_clouds, true, &tick);
@@ -326,7 +349,7 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
     } else {
         distance_matrix(&cat_ref_clouds, &cat_ref_clouds, true, &tick)
     };
-    pb.finish_and_clear();
+    progress.finish();
     let id_s = t_id.elapsed().as_secs_f64();
 
     let metrics = if gen_clouds.len() >= 2 {
@@ -635,17 +658,11 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
     let empty_parts: usize = recs.iter().map(|r| r.3).sum();
 
     let pairs = rec_clouds.len() * originals.len() + originals.len() * (originals.len() - 1) / 2;
-    let pb = super::progress_bar(pairs, "ID pairs");
-    let done = AtomicUsize::new(0);
-    let tick = |k: usize| {
-        let d = done.fetch_add(k, Ordering::Relaxed) + k;
-        if d.is_multiple_of(64) || d == pairs {
-            pb.set_position(d as u64);
-        }
-    };
+    let progress = PairProgress::new(pairs);
+    let tick = |n: usize| progress.tick(n);
     let d_ro = distance_matrix(&rec_clouds, &originals, false, &tick);
     let d_oo = distance_matrix(&originals, &originals, true, &tick);
-    pb.finish_and_clear();
+    progress.finish();
     let (cat_hits, self_hits) =
         reconstruction_nn(&d_ro, &rows, &labels).context("reconstruction distances")?;
     let ceiling = loo_label_accuracy(&d_oo, &labels);

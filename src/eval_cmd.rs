@@ -772,10 +772,9 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The shape prior of `dir` with its sizes and training report: a weights directory
-/// (`manifest.json`, sha256 checked) or a `train shape` output directory
-/// (`shape_prior.safetensors` + `shape_train.json`), so candidates are measured before a
-/// denoiser is trained on them.
+/// The shape prior of `dir` with its sizes and training report (or checkpoint): a weights
+/// directory (`manifest.json`, sha256 checked) or a `train shape` output directory, finished
+/// or stopped at a checkpoint, so candidates are measured before a denoiser is trained on them.
 fn load_any_shape_prior(
     dir: &Path,
 ) -> anyhow::Result<(
@@ -783,22 +782,15 @@ fn load_any_shape_prior(
     physnap::model::shape_prior::ShapePriorConfig,
     serde_json::Value,
 )> {
-    use physnap::train::shape::{REPORT_FILE, WEIGHTS_FILE, load_shape_prior};
-    if dir.join("manifest.json").is_file() || !dir.join(REPORT_FILE).is_file() {
+    use physnap::train::shape::{CHECKPOINT_FILE, REPORT_FILE, load_shape_dir};
+    let is_run = dir.join(REPORT_FILE).is_file() || dir.join(CHECKPOINT_FILE).is_file();
+    if dir.join("manifest.json").is_file() || !is_run {
         let models = load_models(dir, &physnap::model::cpu())?;
         let cfg = models.manifest.shape_prior.config;
         let report = models.manifest.training["shape"].clone();
         return Ok((models.shape_prior, cfg, report));
     }
-    let report_path = dir.join(REPORT_FILE);
-    let report: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(&report_path)
-            .with_context(|| format!("reading {}", report_path.display()))?,
-    )
-    .with_context(|| format!("parsing {}", report_path.display()))?;
-    let cfg = physnap::train::shape::read_model_config(&report_path)?;
-    let model = load_shape_prior(&dir.join(WEIGHTS_FILE), &cfg, &physnap::model::cpu())?;
-    Ok((model, cfg, report))
+    Ok(load_shape_dir(dir, &physnap::model::cpu())?)
 }
 
 /// `physnap eval shape`: IoU of the weights' shape prior on parts of one split.

@@ -99,7 +99,8 @@ enum EvalCommand {
 #[derive(Args, Debug)]
 struct EvalReconstructionArgs {
     /// Weights directory with manifest.json, or a `train shape` output directory
-    /// (shape_prior.safetensors + shape_train.json): its shape prior is evaluated.
+    /// (shape_prior.safetensors + shape_train.json, or + shape_checkpoint.json of a run
+    /// stopped at a checkpoint): its shape prior is evaluated.
     #[arg(long, env = "PHYSNAP_WEIGHTS", default_value = "weights")]
     weights: PathBuf,
     /// Imported data set whose test split is reconstructed.
@@ -133,7 +134,8 @@ struct EvalReconstructionArgs {
 #[derive(Args, Debug)]
 struct EvalShapeArgs {
     /// Weights directory with manifest.json, or a `train shape` output directory
-    /// (shape_prior.safetensors + shape_train.json): its shape prior is evaluated.
+    /// (shape_prior.safetensors + shape_train.json, or + shape_checkpoint.json of a run
+    /// stopped at a checkpoint): its shape prior is evaluated.
     #[arg(long, env = "PHYSNAP_WEIGHTS", default_value = "weights")]
     weights: PathBuf,
     /// Imported data set (output of `physnap data import`).

@@ -840,6 +840,47 @@ pub fn load_shape_prior(
     Ok(model)
 }
 
+/// The shape prior in a `train shape` output directory with its sizes and the document they
+/// came from: `shape_train.json` of a finished run, else `shape_checkpoint.json` of a run that
+/// stopped at a checkpoint (`--stop-at`, or killed), whose weights must match the sha256 it
+/// recorded. Lets a candidate be measured before — or while — it trains to the end.
+pub fn load_shape_dir(
+    dir: &Path,
+    device: &Device,
+) -> Result<(ShapePrior, ShapePriorConfig, Value), TrainError> {
+    let report = dir.join(REPORT_FILE);
+    let checkpoint = dir.join(CHECKPOINT_FILE);
+    let doc_path = if report.is_file() {
+        report
+    } else if checkpoint.is_file() {
+        checkpoint
+    } else {
+        return Err(TrainError::data(
+            dir,
+            format!("neither {REPORT_FILE} nor {CHECKPOINT_FILE}: not a `train shape` output"),
+        ));
+    };
+    let text = std::fs::read_to_string(&doc_path).map_err(TrainError::io(&doc_path))?;
+    let doc: Value =
+        serde_json::from_str(&text).map_err(|e| TrainError::data(&doc_path, e.to_string()))?;
+    let cfg = model_config_of(&doc, &doc_path)?;
+    let weights = dir.join(WEIGHTS_FILE);
+    if doc_path.ends_with(CHECKPOINT_FILE) {
+        let bytes = std::fs::read(&weights).map_err(TrainError::io(&weights))?;
+        if doc["weights_sha256"] != crate::model::weights::sha256_hex(&bytes).as_str() {
+            return Err(TrainError::data(
+                &weights,
+                format!(
+                    "sha256 differs from the one {} recorded: the checkpoint is incomplete",
+                    doc_path.display()
+                ),
+            ));
+        }
+    }
+    let model = load_shape_prior(&weights, &cfg, device)?;
+    Ok((model, cfg, doc))
+}
+
 /// Codes of parts `0..parts` of object `id` in `data`, encoded as the codebook encodes them
 /// (the first `surface_points` points of each `part<k>_surface.npy`, cycled if fewer), one
 /// encoder call for the object.
@@ -1760,6 +1801,10 @@ mod tests {
         let r1 = train_shape(&train, &first, &out, &mut |p| losses.push(p.loss)).unwrap();
         assert_eq!(r1.steps, 6);
         assert!(out.join(CHECKPOINT_FILE).is_file() && !out.join(REPORT_FILE).exists());
+        // A stopped run's weights load from its checkpoint, with its sizes.
+        let (_, sizes, doc) = load_shape_dir(&out, &cpu()).unwrap();
+        assert_eq!(sizes, cfg.model);
+        assert_eq!(doc["step"], 6);
         // Other training options: refused, naming the field and both values.
         let other = ShapeTrainConfig {
             lr: 1e-3,
@@ -1810,6 +1855,16 @@ mod tests {
             err.contains(WEIGHTS_FILE) && err.contains("sha256"),
             "{err}"
         );
+        let err = load_shape_dir(&broken, &cpu()).unwrap_err().to_string();
+        assert!(
+            err.contains(WEIGHTS_FILE) && err.contains("sha256"),
+            "{err}"
+        );
+        // A finished run loads from its report; an empty directory is named as not a run.
+        let (_, sizes, doc) = load_shape_dir(&out, &cpu()).unwrap();
+        assert_eq!((sizes, doc["steps"].as_u64()), (cfg.model, Some(12)));
+        let err = load_shape_dir(data.path(), &cpu()).unwrap_err().to_string();
+        assert!(err.contains("not a `train shape` output"), "{err}");
     }
 
     #[test]

@@ -547,9 +547,9 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
     use physnap::graph::{GraphTensor, ProjectOptions, node_ch, project};
     use physnap::train::shape::encode_object_parts;
     let started = Instant::now();
-    if !["encoded", "original"].contains(&a.shapes.as_str()) {
+    if !["encoded", "original", "analytic"].contains(&a.shapes.as_str()) {
         bail!(
-            "invalid --shapes {:?} (must be encoded or original)",
+            "invalid --shapes {:?} (must be encoded, original or analytic)",
             a.shapes
         );
     }
@@ -633,6 +633,14 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
                     );
                 }
                 orig_meshes.clone()
+            } else if a.shapes == "analytic" {
+                // The originals' own shapes (primitives), meshed like decoded ones: what
+                // marching cubes at this resolution alone loses.
+                let mut obj = obj.clone();
+                for (part, o) in obj.parts.iter_mut().zip(&orig.parts) {
+                    part.shape = o.shape.clone();
+                }
+                physnap::mesh::mesh_parts(&obj, None, &meshing)?
             } else {
                 physnap::mesh::mesh_parts(&obj, Some(&decoder), &meshing)?
             };

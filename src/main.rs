@@ -122,9 +122,10 @@ struct EvalReconstructionArgs {
     #[arg(long, env = "PHYSNAP_SEED", default_value_t = 12345)]
     seed: u64,
     /// Part shapes of the reconstructions: encoded (codes from the shape prior's encoder,
-    /// meshed by its decoder) or original (the originals' meshes on the projected graph: what
-    /// the graph representation alone loses, the control).
-    #[arg(long, env = "PHYSNAP_EVAL_SHAPES", default_value = "encoded", value_parser = ["encoded", "original"])]
+    /// meshed by its decoder), original (the originals' meshes on the projected graph: what
+    /// the graph representation alone loses, the control) or analytic (the originals'
+    /// primitive shapes meshed by marching cubes like decoded ones: what meshing alone loses).
+    #[arg(long, env = "PHYSNAP_EVAL_SHAPES", default_value = "encoded", value_parser = ["encoded", "original", "analytic"])]
     shapes: String,
     /// Also write the report as JSON here.
     #[arg(long, env = "PHYSNAP_EVAL_OUT")]

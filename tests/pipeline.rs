@@ -519,6 +519,24 @@ fn synth_import_train_generate() {
         rc["category_accuracy"], rc["original_loo_accuracy"],
         "{rc:#}"
     );
+    // `--shapes analytic`: the originals' primitives meshed like decoded shapes.
+    let out = ok(&[
+        "eval",
+        "reconstruction",
+        "--weights",
+        s(&weights),
+        "--data",
+        s(&data),
+        "--shapes",
+        "analytic",
+        "--states",
+        "1",
+        "--points",
+        "32",
+        "--resolution",
+        "16",
+    ]);
+    assert!(out.contains("category accuracy"), "{out}");
     let o = physnap(&[
         "eval",
         "reconstruction",

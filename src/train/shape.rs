@@ -866,16 +866,7 @@ pub fn load_shape_dir(
     let cfg = model_config_of(&doc, &doc_path)?;
     let weights = dir.join(WEIGHTS_FILE);
     if doc_path.ends_with(CHECKPOINT_FILE) {
-        let bytes = std::fs::read(&weights).map_err(TrainError::io(&weights))?;
-        if doc["weights_sha256"] != crate::model::weights::sha256_hex(&bytes).as_str() {
-            return Err(TrainError::data(
-                &weights,
-                format!(
-                    "sha256 differs from the one {} recorded: the checkpoint is incomplete",
-                    doc_path.display()
-                ),
-            ));
-        }
+        check_checkpoint_weights(&weights, &doc, &doc_path)?;
     }
     let model = load_shape_prior(&weights, &cfg, device)?;
     Ok((model, cfg, doc))
@@ -1360,6 +1351,26 @@ fn write_checkpoint(
     )
 }
 
+/// Refuse `weights` unless its sha256 is the `weights_sha256` the checkpoint document `doc`
+/// (read from `doc_path`) recorded: a run killed between the two writes leaves them apart.
+fn check_checkpoint_weights(
+    weights: &Path,
+    doc: &Value,
+    doc_path: &Path,
+) -> Result<(), TrainError> {
+    let bytes = std::fs::read(weights).map_err(TrainError::io(weights))?;
+    if doc["weights_sha256"] != crate::model::weights::sha256_hex(&bytes).as_str() {
+        return Err(TrainError::data(
+            weights,
+            format!(
+                "sha256 differs from the one {} recorded: the checkpoint is incomplete",
+                doc_path.display()
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// Read `out/shape_checkpoint.json`, refusing one written by a different run (a config field of
 /// [`RESUME_FIELDS`] differs: named with both values) or whose weights file is not the one it
 /// was written with.
@@ -1388,17 +1399,7 @@ fn read_checkpoint(out: &Path, cfg: &ShapeTrainConfig) -> Result<Checkpoint, Tra
             });
         }
     }
-    let weights = out.join(WEIGHTS_FILE);
-    let bytes = std::fs::read(&weights).map_err(TrainError::io(&weights))?;
-    if v["weights_sha256"] != crate::model::weights::sha256_hex(&bytes).as_str() {
-        return Err(TrainError::data(
-            &weights,
-            format!(
-                "sha256 differs from the one {} recorded: the checkpoint is incomplete",
-                path.display()
-            ),
-        ));
-    }
+    check_checkpoint_weights(&out.join(WEIGHTS_FILE), &v, &path)?;
     let bad = |k: &str| TrainError::data(&path, format!("{k} is missing or malformed"));
     let num = |k: &str| v[k].as_f64().ok_or_else(|| bad(k));
     let step = v["step"].as_u64().ok_or_else(|| bad("step"))? as usize;

@@ -543,16 +543,12 @@ const MAX_SHAPE_PARTS: usize = 5000;
 /// reproduced test objects exactly; if it is far below the originals' own leave-one-out figure,
 /// no denoiser can meet the category target with this shape prior.
 pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
-    use physnap::eval::generative::{loo_label_accuracy, reconstruction_nn};
+    use physnap::eval::generative::{
+        loo_label_accuracy, reconstruction_neighbours, reconstruction_nn,
+    };
     use physnap::graph::{GraphTensor, ProjectOptions, node_ch, project};
     use physnap::train::shape::encode_object_parts;
     let started = Instant::now();
-    if !["encoded", "original", "analytic"].contains(&a.shapes.as_str()) {
-        bail!(
-            "invalid --shapes {:?} (must be encoded, original or analytic)",
-            a.shapes
-        );
-    }
     let id = IdOptions {
         states: a.states,
         points: a.points,
@@ -673,6 +669,8 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
     progress.finish();
     let (cat_hits, self_hits) =
         reconstruction_nn(&d_ro, &rows, &labels).context("reconstruction distances")?;
+    let neighbours = reconstruction_neighbours(&d_ro, &rows, labels.len())
+        .context("reconstruction distances")?;
     let ceiling = loo_label_accuracy(&d_oo, &labels);
     let total = recs.len();
     let own: Vec<f64> = rows.iter().enumerate().map(|(r, &i)| d_ro[r][i]).collect();
@@ -696,17 +694,10 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
     let per_cat: Vec<(String, usize, usize)> = cats
         .iter()
         .map(|c| {
-            let of_cat: Vec<usize> = (0..rows.len()).filter(|&r| &labels[rows[r]] == c).collect();
-            let hits = of_cat
+            let hits = neighbours
                 .iter()
-                .filter(|&&r| {
-                    let i = rows[r];
-                    let nn = (0..total)
-                        .filter(|&j| j != i)
-                        .min_by(|&x, &y| d_ro[r][x].total_cmp(&d_ro[r][y]))
-                        .expect("at least 2 objects");
-                    &labels[nn] == c
-                })
+                .zip(&rows)
+                .filter(|&(&(other, _), &i)| &labels[i] == c && &labels[other] == c)
                 .count();
             let all = labels.iter().filter(|l| *l == c).count();
             (c.clone(), hits, all)

@@ -533,18 +533,15 @@ pub fn loo_label_accuracy(d: &[Vec<f64>], labels: &[String]) -> Option<f64> {
     Some(hits as f64 / n as f64)
 }
 
-/// Nearest-neighbour checks of reconstructions. `d[r]` holds the IDs between the
-/// reconstruction of original object `rows[r]` and every original object (columns in the order
-/// of `labels`). Returns the counts (category hits: the nearest original *other than itself*
-/// carries its label — what the category accuracy of a conditioned sample could reach if the
-/// denoiser reproduced test objects exactly; self hits: the nearest original of all is the
-/// object itself). None when a row or index does not fit, or below two originals.
-pub fn reconstruction_nn(
+/// For each reconstruction row `r` (of original object `rows[r]`; `d[r]` holds its IDs to
+/// every original, in the order of the `n` originals): (its nearest original other than
+/// itself, its nearest original of all). None when a row or index does not fit, or below two
+/// originals.
+pub fn reconstruction_neighbours(
     d: &[Vec<f64>],
     rows: &[usize],
-    labels: &[String],
-) -> Option<(usize, usize)> {
-    let n = labels.len();
+    n: usize,
+) -> Option<Vec<(usize, usize)>> {
     if n < 2 || d.len() != rows.len() || d.iter().any(|row| row.len() != n) {
         return None;
     }
@@ -557,11 +554,33 @@ pub fn reconstruction_nn(
             .min_by(|&a, &b| d[r][a].total_cmp(&d[r][b]))
             .expect("n >= 2")
     };
-    let cat = (0..rows.len())
-        .filter(|&r| labels[nearest(r, Some(rows[r]))] == labels[rows[r]])
+    Some(
+        (0..rows.len())
+            .map(|r| (nearest(r, Some(rows[r])), nearest(r, None)))
+            .collect(),
+    )
+}
+
+/// Nearest-neighbour checks of reconstructions (see [`reconstruction_neighbours`] for `d` and
+/// `rows`). Returns the counts (category hits: the nearest original *other than itself*
+/// carries its label — what the category accuracy of a conditioned sample could reach if the
+/// denoiser reproduced test objects exactly; self hits: the nearest original of all is the
+/// object itself).
+pub fn reconstruction_nn(
+    d: &[Vec<f64>],
+    rows: &[usize],
+    labels: &[String],
+) -> Option<(usize, usize)> {
+    let nn = reconstruction_neighbours(d, rows, labels.len())?;
+    let cat = nn
+        .iter()
+        .zip(rows)
+        .filter(|&(&(other, _), &i)| labels[other] == labels[i])
         .count();
-    let own = (0..rows.len())
-        .filter(|&r| nearest(r, None) == rows[r])
+    let own = nn
+        .iter()
+        .zip(rows)
+        .filter(|&(&(_, any), &i)| any == i)
         .count();
     Some((cat, own))
 }

@@ -208,9 +208,10 @@ fn sample_meshes(meshes: &[TriMesh], n: usize, rng: &mut Rng) -> Vec<[f32; 3]> {
     }
     (0..n)
         .map(|_| {
-            let k = cum
-                .partition_point(|&c| c <= rng.uniform() * total)
-                .min(tris.len() - 1);
+            // One draw per sample: the predicate of a binary search must not change between its
+            // probes (a fresh draw per probe skews the choice towards the triangles' order).
+            let x = rng.uniform() * total;
+            let k = cum.partition_point(|&c| c <= x).min(tris.len() - 1);
             let (a, b, c) = tris[k];
             let s = rng.uniform().sqrt();
             let r = rng.uniform();
@@ -654,6 +655,42 @@ mod tests {
         let want = plain(&a, &b) + plain(&b, &a);
         let got = chamfer(&Cloud::new(&a), &Cloud::new(&b));
         assert!((want - got).abs() < 1e-9, "{want} vs {got}");
+    }
+
+    #[test]
+    fn surface_samples_follow_triangle_area_whatever_the_triangle_order() {
+        // One big triangle (area 0.5 · 3 · 2 = 3) and fifteen small ones (area 1/15 each, total
+        // 1) in the plane z = 0: 3/4 of the samples belong on the big one. The big triangle is
+        // last, where a binary search over the cumulative areas probes most and a per-probe draw
+        // would bias it most.
+        let mut mesh = TriMesh::default();
+        for i in 0..15 {
+            let x = 10.0 + i as f32;
+            let base = mesh.positions.len() as u32;
+            mesh.positions
+                .extend([[x, 0.0, 0.0], [x + 1.0, 0.0, 0.0], [x, 2.0 / 15.0, 0.0]]);
+            mesh.triangles.push([base, base + 1, base + 2]);
+        }
+        let base = mesh.positions.len() as u32;
+        mesh.positions
+            .extend([[0.0, 0.0, 0.0], [3.0, 0.0, 0.0], [0.0, 2.0, 0.0]]);
+        mesh.triangles.push([base, base + 1, base + 2]);
+        let n = 20_000;
+        let pts = sample_meshes(&[mesh], n, &mut Rng::new(3));
+        assert_eq!(pts.len(), n);
+        let on_big = pts.iter().filter(|p| p[0] < 5.0).count() as f64 / n as f64;
+        // Binomial standard deviation at n = 20 000 is 0.003.
+        assert!(
+            (on_big - 0.75).abs() < 0.015,
+            "fraction on the big triangle {on_big}"
+        );
+        // Within the big triangle, uniform by area: 1/4 of its samples have x > 1.5.
+        let big: Vec<_> = pts.iter().filter(|p| p[0] < 5.0).collect();
+        let right = big.iter().filter(|p| p[0] > 1.5).count() as f64 / big.len() as f64;
+        assert!(
+            (right - 0.25).abs() < 0.02,
+            "fraction beyond x = 1.5: {right}"
+        );
     }
 
     #[test]

@@ -544,7 +544,7 @@ const MAX_SHAPE_PARTS: usize = 5000;
 /// no denoiser can meet the category target with this shape prior.
 pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
     use physnap::eval::generative::{
-        loo_label_accuracy, reconstruction_neighbours, reconstruction_nn,
+        loo_label_accuracy, reconstruction_hits, reconstruction_neighbours,
     };
     use physnap::graph::{GraphTensor, ProjectOptions, node_ch, project};
     use physnap::train::shape::encode_object_parts;
@@ -667,10 +667,9 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
     let d_ro = distance_matrix(&rec_clouds, &originals, false, &tick);
     let d_oo = distance_matrix(&originals, &originals, true, &tick);
     progress.finish();
-    let (cat_hits, self_hits) =
-        reconstruction_nn(&d_ro, &rows, &labels).context("reconstruction distances")?;
     let neighbours = reconstruction_neighbours(&d_ro, &rows, labels.len())
         .context("reconstruction distances")?;
+    let (cat_hits, self_hits) = reconstruction_hits(&neighbours, &rows, &labels);
     let ceiling = loo_label_accuracy(&d_oo, &labels);
     let total = recs.len();
     let own: Vec<f64> = rows.iter().enumerate().map(|(r, &i)| d_ro[r][i]).collect();

@@ -447,23 +447,25 @@ fn synth_import_train_generate() {
     );
     // `eval reconstruction`: every test object through the representation, against the
     // originals.
+    // The shipped shape prior's weights and the test data, 1 state × 32 points, plus `extra`.
+    let reconstruct = |extra: &[&str]| -> String {
+        let mut args = vec![
+            "eval",
+            "reconstruction",
+            "--weights",
+            s(&weights),
+            "--data",
+            s(&data),
+            "--states",
+            "1",
+            "--points",
+            "32",
+        ];
+        args.extend_from_slice(extra);
+        ok(&args)
+    };
     let report = root.path().join("reconstruction.json");
-    let out = ok(&[
-        "eval",
-        "reconstruction",
-        "--weights",
-        s(&weights),
-        "--data",
-        s(&data),
-        "--states",
-        "1",
-        "--points",
-        "32",
-        "--resolution",
-        "16",
-        "--out",
-        s(&report),
-    ]);
+    let out = reconstruct(&["--resolution", "16", "--out", s(&report)]);
     assert!(out.contains("category accuracy"), "{out}");
     let rc: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
@@ -491,22 +493,7 @@ fn synth_import_train_generate() {
     // loses nothing, so every reconstruction is at distance ≈ 0 from its original and the
     // category accuracy is the originals' own leave-one-out figure.
     let report = root.path().join("reconstruction_original.json");
-    ok(&[
-        "eval",
-        "reconstruction",
-        "--weights",
-        s(&weights),
-        "--data",
-        s(&data),
-        "--shapes",
-        "original",
-        "--states",
-        "1",
-        "--points",
-        "32",
-        "--out",
-        s(&report),
-    ]);
+    reconstruct(&["--shapes", "original", "--out", s(&report)]);
     let rc: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
     // (0 up to rounding: the graph stores f32.)
@@ -520,22 +507,7 @@ fn synth_import_train_generate() {
         "{rc:#}"
     );
     // `--shapes analytic`: the originals' primitives meshed like decoded shapes.
-    let out = ok(&[
-        "eval",
-        "reconstruction",
-        "--weights",
-        s(&weights),
-        "--data",
-        s(&data),
-        "--shapes",
-        "analytic",
-        "--states",
-        "1",
-        "--points",
-        "32",
-        "--resolution",
-        "16",
-    ]);
+    let out = reconstruct(&["--shapes", "analytic", "--resolution", "16"]);
     assert!(out.contains("category accuracy"), "{out}");
     let o = physnap(&[
         "eval",

@@ -573,6 +573,15 @@ pub fn reconstruction_nn(
     labels: &[String],
 ) -> Option<(usize, usize)> {
     let nn = reconstruction_neighbours(d, rows, labels.len())?;
+    Some(reconstruction_hits(&nn, rows, labels))
+}
+
+/// The counts of [`reconstruction_nn`] from already computed [`reconstruction_neighbours`].
+pub fn reconstruction_hits(
+    nn: &[(usize, usize)],
+    rows: &[usize],
+    labels: &[String],
+) -> (usize, usize) {
     let cat = nn
         .iter()
         .zip(rows)
@@ -583,7 +592,7 @@ pub fn reconstruction_nn(
         .zip(rows)
         .filter(|&(&(_, any), &i)| any == i)
         .count();
-    Some((cat, own))
+    (cat, own)
 }
 
 #[cfg(test)]

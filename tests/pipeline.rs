@@ -447,7 +447,7 @@ fn synth_import_train_generate() {
     );
     // `eval reconstruction`: every test object through the representation, against the
     // originals.
-    // The shipped shape prior's weights and the test data, 1 state × 32 points, plus `extra`.
+    // This test's weights and data, 1 state × 32 points, plus `extra`.
     let reconstruct = |extra: &[&str]| -> String {
         let mut args = vec![
             "eval",

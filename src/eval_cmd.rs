@@ -192,6 +192,26 @@ fn sample_set(
     )?)
 }
 
+/// One requested category's conditioned samples: how many, how many hit, and the category of
+/// each sample's nearest reference (`(invalid)` for samples that failed validity).
+#[derive(Default)]
+struct CategoryHits {
+    category: String,
+    hits: usize,
+    samples: usize,
+    nearest: std::collections::BTreeMap<String, usize>,
+}
+
+impl CategoryHits {
+    fn record(&mut self, nearest: &str) {
+        self.samples += 1;
+        if nearest == self.category {
+            self.hits += 1;
+        }
+        *self.nearest.entry(nearest.to_string()).or_default() += 1;
+    }
+}
+
 pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
     let started = Instant::now();
     let order = match a.order.as_str() {
@@ -357,8 +377,21 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
     } else {
         None
     };
-    // Category accuracy: the nearest reference of a conditioned sample has its category.
-    let mut per_cat: Vec<(String, usize, usize)> = cats.iter().map(|c| (c.clone(), 0, 0)).collect();
+    // Category accuracy: the nearest reference of a conditioned sample has its category. Each
+    // entry also counts the categories the samples landed nearest to (the confusion row).
+    let mut per_cat: Vec<CategoryHits> = cats
+        .iter()
+        .map(|c| CategoryHits {
+            category: c.clone(),
+            ..Default::default()
+        })
+        .collect();
+    let entry = |per_cat: &mut Vec<CategoryHits>, c: &str| -> usize {
+        per_cat
+            .iter()
+            .position(|e| e.category == c)
+            .expect("known category")
+    };
     for ((c, _), row) in cond_valid.iter().zip(&d_cr) {
         let nn = row
             .iter()
@@ -366,22 +399,19 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
             .min_by(|a, b| a.1.total_cmp(b.1))
             .map(|(i, _)| i)
             .unwrap_or(0);
-        let e = per_cat
-            .iter_mut()
-            .find(|e| &e.0 == c)
-            .expect("known category");
-        e.2 += 1;
-        if &cat_ref_cats[nn] == c {
-            e.1 += 1;
-        }
+        let k = entry(&mut per_cat, c);
+        per_cat[k].record(&cat_ref_cats[nn]);
     }
     // Invalid conditioned samples count as misses.
     for (c, g) in &cond {
         if invalid_reason(&g.object, &g.meshes).is_some() {
-            per_cat.iter_mut().find(|e| &e.0 == c).expect("known").2 += 1;
+            let k = entry(&mut per_cat, c);
+            per_cat[k].record("(invalid)");
         }
     }
-    let (hits, tries) = per_cat.iter().fold((0, 0), |s, e| (s.0 + e.1, s.1 + e.2));
+    let (hits, tries) = per_cat
+        .iter()
+        .fold((0, 0), |s, e| (s.0 + e.hits, s.1 + e.samples));
     let cat_acc = (tries > 0).then(|| hits as f64 / tries as f64);
     // The ceiling of that metric: how often a test object's nearest other test object (among
     // the category references) shares its category.
@@ -442,8 +472,19 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
             cond.len(),
             a.category.category_guidance
         );
-        for (c, h, t) in &per_cat {
-            println!("    {c:<18} {h}/{t}");
+        for e in &per_cat {
+            let misses: Vec<String> = e
+                .nearest
+                .iter()
+                .filter(|(n, _)| **n != e.category)
+                .map(|(n, k)| format!("{n} {k}"))
+                .collect();
+            let misses = if misses.is_empty() {
+                String::new()
+            } else {
+                format!("   nearest instead: {}", misses.join(", "))
+            };
+            println!("    {:<18} {}/{}{misses}", e.category, e.hits, e.samples);
         }
     }
     if let Some(acc) = ref_acc {
@@ -484,7 +525,7 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
             "accuracy": cat_acc,
             "reference_loo_accuracy": ref_acc,
             "references": cat_ref_cats.len(),
-            "categories": per_cat.iter().map(|(c, h, t)| json!({"category": c, "hits": h, "samples": t})).collect::<Vec<_>>(),
+            "categories": per_cat.iter().map(|e| json!({"category": e.category, "hits": e.hits, "samples": e.samples, "nearest": e.nearest})).collect::<Vec<_>>(),
         },
         "seconds": { "sampling": sampling_s, "id": id_s, "total": wall },
         "command": std::env::args().collect::<Vec<_>>().join(" "),

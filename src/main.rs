@@ -357,6 +357,10 @@ struct DiffusionArgs {
     /// Denoiser graph layers.
     #[arg(long, env = "PHYSNAP_DENOISER_LAYERS", default_value_t = 4)]
     layers: usize,
+    /// Also add a learned category row to every graph layer's inputs, not only to the initial
+    /// embeddings (physnap's option; the shipped weights are trained without it).
+    #[arg(long, env = "PHYSNAP_DENOISER_CATEGORY_LAYERS")]
+    category_layers: bool,
     /// Seed.
     #[arg(long, env = "PHYSNAP_SEED", default_value_t = 12345)]
     seed: u64,

@@ -151,6 +151,7 @@ pub fn diffusion(a: DiffusionArgs) -> anyhow::Result<()> {
     let model = DenoiserConfig {
         width: a.width,
         layers: a.layers,
+        category_layers: a.category_layers,
         ..DenoiserConfig::default()
     };
     let cfg = DiffusionTrainConfig {

@@ -410,6 +410,18 @@ fn synth_import_train_generate() {
     assert_eq!(g["unconditional"]["samples"], 2, "{g:#}");
     let acc = g["conditional"]["accuracy"].as_f64().unwrap();
     assert!((0.0..=1.0).contains(&acc), "{g:#}");
+    // Each category's confusion row accounts for every sample, its own count for the hits.
+    for c in g["conditional"]["categories"].as_array().unwrap() {
+        let nearest = c["nearest"].as_object().unwrap();
+        let total: u64 = nearest.values().map(|n| n.as_u64().unwrap()).sum();
+        assert_eq!(total, c["samples"].as_u64().unwrap(), "{c:#}");
+        let own = nearest.get(c["category"].as_str().unwrap());
+        assert_eq!(
+            own.map_or(0, |n| n.as_u64().unwrap()),
+            c["hits"].as_u64().unwrap(),
+            "{c:#}"
+        );
+    }
     // A `train shape` output directory is evaluated as well (a candidate before any denoiser
     // is trained on it): the same shape prior, the same figures.
     let report2 = root.path().join("shape_eval_dir.json");

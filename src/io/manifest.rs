@@ -54,6 +54,9 @@ struct DenoiserConfigDoc {
     edge_head_hidden: Vec<usize>,
     categories: usize,
     legacy_edge_embedding: bool,
+    /// Absent in manifests written before the option existed (false).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    category_layers: bool,
 }
 
 /// The retrieval codebook's size and provenance (model/codebook.rs).
@@ -156,6 +159,7 @@ fn denoiser_to_doc(c: &DenoiserConfig) -> DenoiserConfigDoc {
         edge_head_hidden: c.edge_head_hidden.clone(),
         categories: c.categories,
         legacy_edge_embedding: c.legacy_edge_embedding,
+        category_layers: c.category_layers,
     }
 }
 
@@ -235,6 +239,7 @@ pub fn from_str(text: &str, path: &str) -> Result<Manifest, FormatError> {
                 edge_head_hidden: d.edge_head_hidden,
                 categories: d.categories,
                 legacy_edge_embedding: d.legacy_edge_embedding,
+                category_layers: d.category_layers,
             },
         },
         codebook: doc.codebook.map(|c| Entry {
@@ -341,4 +346,29 @@ pub fn load_models(dir: &Path, device: &burn::tensor::Device) -> Result<LoadedMo
         denoiser,
         codebook,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn category_layers_round_trip_and_default_to_off_in_older_manifests() {
+        // The shipped manifest predates the option: it loads as off, and writes back without it.
+        let shipped = include_str!("../../weights/manifest.json");
+        let m = from_str(shipped, "weights/manifest.json").unwrap();
+        assert!(!m.denoiser.config.category_layers);
+        assert!(!to_string(&m).contains("category_layers"));
+        let mut on = m.clone();
+        on.denoiser.config.category_layers = true;
+        let text = to_string(&on);
+        assert!(text.contains("\"category_layers\": true"), "{text}");
+        assert!(
+            from_str(&text, "m.json")
+                .unwrap()
+                .denoiser
+                .config
+                .category_layers
+        );
+    }
 }

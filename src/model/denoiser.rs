@@ -31,6 +31,12 @@
 //! argument (the sampler can pass the request's category uniformly); [`Denoiser::check_inputs`]
 //! reports a category given to an unconditional model as an error for callers that want to be
 //! strict.
+//!
+//! `category_layers` (physnap's option, off in the shipped weights): a second, zero-initialised
+//! table of (categories + 1) × (L · w) whose row block ℓ is added to layer ℓ's node and edge
+//! inputs, `(h, g) ← GraphLayer_ℓ(h + c_ℓ, g + c_ℓ)`, so every layer sees the category, not
+//! only h⁰ / g⁰ (which reach the heads through the wide skip). Drawn after every other
+//! parameter, so turning it on leaves the rest of the initialisation unchanged.
 
 use burn::module::{Module, Param, ParamId};
 use burn::nn::{Embedding, Linear};
@@ -79,6 +85,11 @@ pub struct DenoiserConfig {
     /// Reproduce NAP's buggy edge-embedding slicing (method.md §3.3); only for loading NAP
     /// weights. Default false (PhysNAP's fix).
     pub legacy_edge_embedding: bool,
+    /// Also add a learned per-layer category row to every graph layer's node and edge inputs
+    /// (physnap, not in the paper, which adds the category to the initial embeddings only).
+    /// One extra table of (categories + 1) × (layers · w), zero-initialised. Ignored when
+    /// unconditional. Default false (the shipped weights).
+    pub category_layers: bool,
 }
 
 impl Default for DenoiserConfig {
@@ -98,6 +109,7 @@ impl Default for DenoiserConfig {
             edge_head_hidden: vec![128, 64, 32],
             categories: crate::data::categories::CATEGORIES.len(),
             legacy_edge_embedding: false,
+            category_layers: false,
         }
     }
 }
@@ -116,6 +128,7 @@ impl DenoiserConfig {
             edge_head_hidden: vec![256, 128, 64],
             categories: 0,
             legacy_edge_embedding: false,
+            category_layers: false,
         }
     }
 
@@ -410,6 +423,9 @@ pub struct Denoiser {
     edge_embed_range: Linear,
     /// (categories + 1) × w, absent when unconditional.
     category: Option<Embedding>,
+    /// (categories + 1) × (layers · w): row block ℓ is added to layer ℓ's inputs; present only
+    /// with `category_layers` on a conditional model.
+    category_layers: Option<Embedding>,
     layers: Vec<GraphLayer>,
     /// [h⁰ … h^L] → w.
     node_wide: Linear,
@@ -474,6 +490,11 @@ impl Denoiser {
             .iter()
             .map(|&(_, n)| WideMlp::new(w + n, &config.edge_head_hidden, n, &mut init))
             .collect();
+        // Drawn last, so the other parameters do not depend on the option.
+        let category_layers =
+            (config.categories > 0 && config.category_layers).then(|| Embedding {
+                weight: init.param([config.categories + 1, config.layers * w], false, 0.0),
+            });
 
         let time_pe = Tensor::from_data(
             TensorData::new(
@@ -513,6 +534,7 @@ impl Denoiser {
             edge_embed_line,
             edge_embed_range,
             category,
+            category_layers,
             layers,
             node_wide,
             edge_wide,
@@ -629,6 +651,10 @@ impl Denoiser {
         assert_eq!(e.dims(), [b, NUM_EDGES, EDGE_DIM], "denoiser: e shape");
         assert_eq!(t.dims(), [b], "denoiser: t shape");
         let w = self.config.width;
+        let cat_layers = self
+            .category_layers
+            .as_ref()
+            .map(|table| table.forward(self.category_index(category.clone(), b).reshape([b, 1])));
         let cat = self.category_vector(category, b);
         let h0 = self.node_embedding(v.clone(), cat.clone());
         let g0 = self.edge_embedding_with(e.clone(), cat);
@@ -640,7 +666,12 @@ impl Denoiser {
         hs.push(h0.clone());
         gs.push(g0.clone().select(1, upper.clone()));
         let (mut h, mut g) = (h0, g0);
-        for layer in &self.layers {
+        for (l, layer) in self.layers.iter().enumerate() {
+            if let Some(c) = &cat_layers {
+                let c = c.clone().narrow(2, l * w, w); // [B,1,w]
+                h = h + c.clone();
+                g = g + c;
+            }
             (h, g) = layer.forward(h, g, self.slot_pe.clone(), tau.clone());
             hs.push(h.clone());
             gs.push(g.clone().select(1, upper.clone()));
@@ -677,11 +708,16 @@ impl Denoiser {
     /// The category row [B,1,w] to add, or None for an unconditional model.
     fn category_vector(&self, category: Option<Tensor<1, Int>>, b: usize) -> Option<Tensor<3>> {
         let table = self.category.as_ref()?;
+        Some(table.forward(self.category_index(category, b).reshape([b, 1])))
+    }
+
+    /// The category rows to look up, [B]: `None` means "no category" for every sample.
+    fn category_index(&self, category: Option<Tensor<1, Int>>, b: usize) -> Tensor<1, Int> {
         let device = self.dense_index.device();
         let idx =
             category.unwrap_or_else(|| int_tensor(vec![self.config.categories as i64; b], &device));
         assert_eq!(idx.dims(), [b], "denoiser: category shape");
-        Some(table.forward(idx.reshape([b, 1])))
+        idx
     }
 
     fn node_embedding(&self, v: Tensor<3>, cat: Option<Tensor<3>>) -> Tensor<3> {
@@ -738,6 +774,7 @@ mod tests {
             edge_head_hidden: vec![16, 8],
             categories,
             legacy_edge_embedding: false,
+            category_layers: false,
         }
     }
 
@@ -1224,10 +1261,28 @@ mod tests {
             .to_vec();
         let slot = sinusoidal_table(K, cfg.slot_pe_dim);
         let pi = |i: usize| &slot[i * cfg.slot_pe_dim..(i + 1) * cfg.slot_pe_dim];
-        // §3.4 graph layers.
+        // §3.4 graph layers (with `category_layers`: row block ℓ added to layer ℓ's inputs).
+        let layer_rows: Option<Vec<f32>> = m.category_layers.as_ref().map(|table| {
+            let all: Vec<f32> = table.weight.val().try_into_vec_as().unwrap();
+            let c = category.unwrap_or(cfg.categories);
+            let lw = cfg.layers * w;
+            all[c * lw..(c + 1) * lw].to_vec()
+        });
         let (mut hs, mut gs) = (vec![h0], vec![g0]);
-        for layer in &m.layers {
-            let (vin, ein) = (hs.last().unwrap(), gs.last().unwrap());
+        for (l, layer) in m.layers.iter().enumerate() {
+            let add_layer = |x: &Vec<Vec<f32>>| -> Vec<Vec<f32>> {
+                x.iter()
+                    .map(|row| match &layer_rows {
+                        Some(r) => row
+                            .iter()
+                            .zip(&r[l * w..(l + 1) * w])
+                            .map(|(a, b)| a + b)
+                            .collect(),
+                        None => row.clone(),
+                    })
+                    .collect()
+            };
+            let (vin, ein) = (add_layer(hs.last().unwrap()), add_layer(gs.last().unwrap()));
             let vb: Vec<Vec<f32>> = (0..K)
                 .map(|i| {
                     ref_silu(ref_linear(
@@ -1304,7 +1359,7 @@ mod tests {
 
     #[test]
     fn batched_forward_matches_literal_reference() {
-        for legacy in [false, true] {
+        for (legacy, category_layers) in [(false, false), (true, false), (false, true)] {
             let cfg = DenoiserConfig {
                 width: 16,
                 layers: 2,
@@ -1315,8 +1370,18 @@ mod tests {
                 edge_head_hidden: vec![8, 4],
                 categories: 3,
                 legacy_edge_embedding: legacy,
+                category_layers,
             };
-            let m = Denoiser::with_seed(&cfg, &cpu(), 7).unwrap();
+            let mut m = Denoiser::with_seed(&cfg, &cpu(), 7).unwrap();
+            if let Some(table) = m.category_layers.as_mut() {
+                // Zero-initialised; give it values so the reference has something to check.
+                let mut rng = Rng::new(3);
+                let vals = gaussian(&mut rng, 4 * 2 * 16);
+                table.weight = Param::from_tensor(Tensor::from_data(
+                    TensorData::new(vals, [4, 2 * 16]),
+                    &cpu(),
+                ));
+            }
             let (v, e) = random_inputs(10, 2);
             let (bv, be) = run(&m, &v, &e, &[17, 640], Some(&[2, 3]));
             let (nv, ne) = (K * NODE_DIM, NUM_EDGES * EDGE_DIM);
@@ -1328,7 +1393,8 @@ mod tests {
                 let de = max_abs_diff(&re, &be[s * ne..(s + 1) * ne]);
                 assert!(
                     dv < 1e-4 * scale.max(1.0) && de < 1e-4 * scale.max(1.0),
-                    "legacy {legacy}, sample {s}: |Δε̂_V| {dv}, |Δε̂_E| {de} (scale {scale})"
+                    "legacy {legacy}, category layers {category_layers}, sample {s}: \
+                     |Δε̂_V| {dv}, |Δε̂_E| {de} (scale {scale})"
                 );
             }
         }
@@ -1364,6 +1430,7 @@ mod tests {
             edge_head_hidden: vec![8],
             categories: 0,
             legacy_edge_embedding: false,
+            category_layers: false,
         };
         // Model on the plain device (weights constant), inputs on the autodiff device — the
         // guidance set-up.
@@ -1482,5 +1549,66 @@ mod tests {
         assert!(row_norm(1) > 0.0 && row_norm(3) > 0.0);
         assert_eq!(row_norm(0), 0.0);
         assert_eq!(row_norm(4), 0.0); // "no category" unused here
+    }
+
+    #[test]
+    fn category_layers_start_as_the_plain_model_and_learn_per_category_rows() {
+        let plain = tiny(4);
+        let with = DenoiserConfig {
+            category_layers: true,
+            ..plain.clone()
+        };
+        let (a, b) = (
+            Denoiser::new(&plain, &cpu()).unwrap(),
+            Denoiser::new(&with, &cpu()).unwrap(),
+        );
+        // One extra (categories + 1) × (layers · w) table, drawn last and zero-initialised:
+        // every other parameter is unchanged, so the untrained models agree.
+        assert_eq!(
+            b.parameter_count() - a.parameter_count(),
+            5 * plain.layers * plain.width
+        );
+        let (v, e) = random_inputs(11, 2);
+        assert_eq!(
+            run(&a, &v, &e, &[40, 900], Some(&[1, 4])),
+            run(&b, &v, &e, &[40, 900], Some(&[1, 4]))
+        );
+        // Only the rows of the categories in the batch get gradients.
+        let ad = cpu_autodiff();
+        let m = Denoiser::new(&with, &ad).unwrap();
+        let (vt, et) = tensors(&v, &e, &ad);
+        let (ev, ee) = m.forward(vt, et, ints(&[5, 700], &ad), Some(ints(&[1, 4], &ad)));
+        let grads = (ev.powi_scalar(2).mean() + ee.powi_scalar(2).mean()).backward();
+        let gt: Vec<f32> = m
+            .category_layers
+            .as_ref()
+            .unwrap()
+            .weight
+            .grad(&grads)
+            .expect("per-layer table grad")
+            .try_into_vec_as::<f32>()
+            .unwrap();
+        let lw = with.layers * with.width;
+        let row = |r: usize| {
+            gt[r * lw..(r + 1) * lw]
+                .iter()
+                .map(|x| x.abs())
+                .sum::<f32>()
+        };
+        assert!(row(1) > 0.0 && row(4) > 0.0, "{} {}", row(1), row(4));
+        assert_eq!(row(0) + row(2) + row(3), 0.0);
+        // The option needs a conditional model to mean anything: none without categories.
+        let m0 = Denoiser::new(
+            &DenoiserConfig {
+                category_layers: true,
+                ..tiny(0)
+            },
+            &cpu(),
+        )
+        .unwrap();
+        assert_eq!(
+            m0.parameter_count(),
+            Denoiser::new(&tiny(0), &cpu()).unwrap().parameter_count()
+        );
     }
 }

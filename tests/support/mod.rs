@@ -45,6 +45,7 @@ pub fn tiny_weights(dir: &Path) {
         edge_head_hidden: vec![16],
         categories: categories.len(),
         legacy_edge_embedding: false,
+        category_layers: false,
     };
     let dn = Denoiser::new(&dn_cfg, &device).unwrap();
     let dn_sha = weights::save(&dn, &dir.join("denoiser.safetensors")).unwrap();

@@ -3,16 +3,17 @@
 #
 #   bash scripts/reproduce-weights.sh [OUT]        # default OUT: repro
 #
-# data synth -> data import -> train shape -> train diffusion (three stages, exactly how the
-# shipped denoiser was trained: 2,000 steps at a constant learning rate, then cosine decay and a
-# weight EMA to 7,000 steps, resumed once at step 3,500 — Adam's moments restart at each resume,
-# so the stages are part of the recipe) -> retrieval codebook (written by train diffusion) ->
-# eval generative --write-manifest. OUT/weights is then a drop-in replacement for weights/.
-# About 2 h 10 min on 2 idle cores (BENCHMARKS.md "Training the shipped weights").
+# data synth -> data import -> train shape -> train diffusion (two runs, exactly how the
+# shipped denoiser was trained: 2,000 steps at a constant learning rate, then --resume with a
+# cosine decay and a weight EMA to 7,000 steps; the denoiser adds its category to every graph
+# layer, --category-layers) -> retrieval codebook (written by train diffusion) -> eval generative
+# --write-manifest. OUT/weights is then a drop-in replacement for weights/.
+# About 2 h on 2 idle cores (BENCHMARKS.md "Training the shipped weights").
 #
 # Knobs (environment; the defaults are the shipped recipe, smaller values make a smoke run):
 #   PHYSNAP_BIN   physnap binary (default: cargo build --release, then target/release/physnap)
-#   OBJECTS (3000)  SHAPE_STEPS (3000)  STAGE1 (2000)  STAGE2 (3500; 0: no stop between)  STEPS (7000)
+#   OBJECTS (3000)  SHAPE_STEPS (3000)  STAGE1 (2000)  STAGE2 (0: no stop between; N: a third run
+#   resumed at N, as the weights shipped before 2026-11-26 were made)  STEPS (7000)
 #   BATCH_OBJECTS (16)  CHECKPOINT_EVERY (500)  IMPORT_FLAGS ("")  SHAPE_FLAGS ("")
 #   DENOISER_FLAGS ("")  EVAL (1: run eval generative; 0: skip)
 set -euo pipefail
@@ -21,7 +22,7 @@ OUT=${1:-repro}
 OBJECTS=${OBJECTS:-3000}
 SHAPE_STEPS=${SHAPE_STEPS:-3000}
 STAGE1=${STAGE1:-2000}
-STAGE2=${STAGE2:-3500}
+STAGE2=${STAGE2:-0}
 STEPS=${STEPS:-7000}
 BATCH_OBJECTS=${BATCH_OBJECTS:-16}
 CHECKPOINT_EVERY=${CHECKPOINT_EVERY:-500}
@@ -61,12 +62,12 @@ run train shape --data "$OUT/train" --out "$OUT/shape" --steps "$SHAPE_STEPS" --
   --decoder-backward burn $SHAPE_FLAGS
 common=(--data "$OUT/train" --shape "$OUT/shape" --out "$OUT/weights"
         --batch-objects "$BATCH_OBJECTS" --noise-levels 4 --lr 5e-4
-        --checkpoint-every "$CHECKPOINT_EVERY")
+        --checkpoint-every "$CHECKPOINT_EVERY" --category-layers)
 # Stage 1: constant learning rate, no EMA.
 # shellcheck disable=SC2086
 run train diffusion "${common[@]}" --steps "$STAGE1" --lr-final-factor 1 --ema-decay 0 $DENOISER_FLAGS
-# Stages 2 and 3: cosine decay from STAGE1 to 0.1 x lr over the run to STEPS, EMA 0.999 from
-# STAGE1; resumed once at STAGE2.
+# Then: cosine decay from STAGE1 to 0.1 x lr over the run to STEPS, EMA 0.999 from STAGE1 (in
+# two runs when STAGE2 is set).
 decay=(--steps "$STEPS" --lr-decay-start "$STAGE1" --lr-final-factor 0.1 --ema-decay 0.999 --resume)
 if [ "$STAGE2" != 0 ]; then
   # shellcheck disable=SC2086

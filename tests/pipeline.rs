@@ -609,7 +609,8 @@ fn synth_import_train_generate() {
 }
 
 /// `scripts/reproduce-weights.sh` (the README's one command for the shipped weights) runs its
-/// whole recipe — including the three denoiser stages and the codebook — at toy scale.
+/// whole recipe — including the denoiser stages (two by default, three with STAGE2) and the
+/// codebook — at toy scale.
 #[test]
 fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     let root = tempfile::tempdir().unwrap();
@@ -667,6 +668,8 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         m["codebook"]["config"]["rows"].as_u64().unwrap() >= 1,
         "{m:#}"
     );
+    // The recipe's denoiser adds its category to every graph layer, as the shipped one does.
+    assert_eq!(m["denoiser"]["config"]["category_layers"], true, "{m:#}");
     // Bad stage order is refused before anything runs.
     let o = Command::new("bash")
         .arg(concat!(

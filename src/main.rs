@@ -358,7 +358,7 @@ struct DiffusionArgs {
     #[arg(long, env = "PHYSNAP_DENOISER_LAYERS", default_value_t = 4)]
     layers: usize,
     /// Also add a learned category row to every graph layer's inputs, not only to the initial
-    /// embeddings (physnap's option; the shipped weights are trained without it).
+    /// embeddings (physnap's option, not the paper's; the shipped weights are trained with it).
     #[arg(long, env = "PHYSNAP_DENOISER_CATEGORY_LAYERS")]
     category_layers: bool,
     /// Seed.

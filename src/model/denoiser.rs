@@ -32,7 +32,8 @@
 //! reports a category given to an unconditional model as an error for callers that want to be
 //! strict.
 //!
-//! `category_layers` (physnap's option, off in the shipped weights): a second, zero-initialised
+//! `category_layers` (physnap's option, on in the shipped weights since 2026-11-26, off in
+//! [`DenoiserConfig::default`]): a second, zero-initialised
 //! table of (categories + 1) × (L · w) whose row block ℓ is added to layer ℓ's node and edge
 //! inputs, `(h, g) ← GraphLayer_ℓ(h + c_ℓ, g + c_ℓ)`, so every layer sees the category, not
 //! only h⁰ / g⁰ (which reach the heads through the wide skip). Drawn after every other
@@ -88,7 +89,7 @@ pub struct DenoiserConfig {
     /// Also add a learned per-layer category row to every graph layer's node and edge inputs
     /// (physnap, not in the paper, which adds the category to the initial embeddings only).
     /// One extra table of (categories + 1) × (layers · w), zero-initialised. Ignored when
-    /// unconditional. Default false (the shipped weights).
+    /// unconditional. Default false (the paper's model); the shipped weights have it on.
     pub category_layers: bool,
 }
 

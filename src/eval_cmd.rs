@@ -386,7 +386,7 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
             ..Default::default()
         })
         .collect();
-    let entry = |per_cat: &mut Vec<CategoryHits>, c: &str| -> usize {
+    let entry = |per_cat: &[CategoryHits], c: &str| -> usize {
         per_cat
             .iter()
             .position(|e| e.category == c)
@@ -399,13 +399,13 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
             .min_by(|a, b| a.1.total_cmp(b.1))
             .map(|(i, _)| i)
             .unwrap_or(0);
-        let k = entry(&mut per_cat, c);
+        let k = entry(&per_cat, c);
         per_cat[k].record(&cat_ref_cats[nn]);
     }
     // Invalid conditioned samples count as misses.
     for (c, g) in &cond {
         if invalid_reason(&g.object, &g.meshes).is_some() {
-            let k = entry(&mut per_cat, c);
+            let k = entry(&per_cat, c);
             per_cat[k].record("(invalid)");
         }
     }

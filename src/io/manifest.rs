@@ -354,9 +354,11 @@ mod tests {
 
     #[test]
     fn category_layers_round_trip_and_default_to_off_in_older_manifests() {
-        // The shipped manifest predates the option: it loads as off, and writes back without it.
-        let shipped = include_str!("../../weights/manifest.json");
-        let m = from_str(shipped, "weights/manifest.json").unwrap();
+        // A manifest written before the option existed (the denoiser shipped until 2026-11-26)
+        // loads as off, and writes back without the field.
+        let older = include_str!("../../docs/eval/category_layers/previous_denoiser_manifest.json");
+        let m = from_str(older, "previous_denoiser_manifest.json").unwrap();
+        assert!(!older.contains("category_layers"));
         assert!(!m.denoiser.config.category_layers);
         assert!(!to_string(&m).contains("category_layers"));
         let mut on = m.clone();

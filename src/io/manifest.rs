@@ -372,5 +372,9 @@ mod tests {
                 .config
                 .category_layers
         );
+        // The shipped denoiser was trained with it.
+        let shipped = include_str!("../../weights/manifest.json");
+        let m = from_str(shipped, "weights/manifest.json").unwrap();
+        assert!(m.denoiser.config.category_layers);
     }
 }

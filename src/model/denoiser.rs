@@ -201,6 +201,12 @@ pub fn sinusoidal_table(rows: usize, dim: usize) -> Vec<f32> {
     out
 }
 
+/// The rows `idx` [B] of an embedding table, as [B,1,width] to broadcast over nodes or edges.
+fn rows_of_table(table: &Embedding, idx: &Tensor<1, Int>) -> Tensor<3> {
+    let b = idx.dims()[0];
+    table.forward(idx.clone().reshape([b, 1]))
+}
+
 /// The weight row block `rows` of a linear layer, `[len, d_out]`.
 fn rows_of(l: &Linear, start: usize, len: usize) -> Tensor<2> {
     l.weight.val().narrow(0, start, len)
@@ -652,11 +658,12 @@ impl Denoiser {
         assert_eq!(e.dims(), [b, NUM_EDGES, EDGE_DIM], "denoiser: e shape");
         assert_eq!(t.dims(), [b], "denoiser: t shape");
         let w = self.config.width;
+        let idx = self.category_index(category, b);
+        let cat = self.category.as_ref().map(|t| rows_of_table(t, &idx));
         let cat_layers = self
             .category_layers
             .as_ref()
-            .map(|table| table.forward(self.category_index(category.clone(), b).reshape([b, 1])));
-        let cat = self.category_vector(category, b);
+            .map(|t| rows_of_table(t, &idx));
         let h0 = self.node_embedding(v.clone(), cat.clone());
         let g0 = self.edge_embedding_with(e.clone(), cat);
 
@@ -709,7 +716,7 @@ impl Denoiser {
     /// The category row [B,1,w] to add, or None for an unconditional model.
     fn category_vector(&self, category: Option<Tensor<1, Int>>, b: usize) -> Option<Tensor<3>> {
         let table = self.category.as_ref()?;
-        Some(table.forward(self.category_index(category, b).reshape([b, 1])))
+        Some(rows_of_table(table, &self.category_index(category, b)))
     }
 
     /// The category rows to look up, [B]: `None` means "no category" for every sample.
@@ -1376,12 +1383,10 @@ mod tests {
             let mut m = Denoiser::with_seed(&cfg, &cpu(), 7).unwrap();
             if let Some(table) = m.category_layers.as_mut() {
                 // Zero-initialised; give it values so the reference has something to check.
-                let mut rng = Rng::new(3);
-                let vals = gaussian(&mut rng, 4 * 2 * 16);
-                table.weight = Param::from_tensor(Tensor::from_data(
-                    TensorData::new(vals, [4, 2 * 16]),
-                    &cpu(),
-                ));
+                let shape = [cfg.categories + 1, cfg.layers * cfg.width];
+                let vals = gaussian(&mut Rng::new(3), shape[0] * shape[1]);
+                table.weight =
+                    Param::from_tensor(Tensor::from_data(TensorData::new(vals, shape), &cpu()));
             }
             let (v, e) = random_inputs(10, 2);
             let (bv, be) = run(&m, &v, &e, &[17, 640], Some(&[2, 3]));

@@ -84,8 +84,9 @@ pub struct SubmitArgs {
     #[arg(long, env = "PHYSNAP_STEPS")]
     steps: Option<u32>,
     /// Codebook retrieval of part shapes: auto (server default: empty when the weights have a
-    /// codebook), off, empty or all.
-    #[arg(long, env = "PHYSNAP_RETRIEVAL", value_parser = ["auto", "off", "empty", "all"])]
+    /// codebook), off, empty, all or category (with --category: every part from that
+    /// category's codes).
+    #[arg(long, env = "PHYSNAP_RETRIEVAL", value_parser = ["auto", "off", "empty", "all", "category"])]
     retrieval: Option<String>,
     /// Classifier-free category guidance w in [0, 20] with --category (server default 2;
     /// 0: plain conditioning).

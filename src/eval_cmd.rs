@@ -298,7 +298,14 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
         retrieval,
         ..Default::default()
     };
-    let uncond = sample_set(&models, base.clone(), &pb)?;
+    let uncond = sample_set(
+        &models,
+        GenerateRequest {
+            retrieval: retrieval.without_category(),
+            ..base.clone()
+        },
+        &pb,
+    )?;
     let mut cond: Vec<(String, Generated)> = Vec::new();
     if conditional {
         for (ci, c) in cats.iter().enumerate() {

@@ -207,8 +207,10 @@ struct EvalGenerativeArgs {
     write_manifest: bool,
     /// Replace part shapes by their nearest training code of the weights' codebook: auto
     /// (empty shapes when the weights have a codebook, else off), off, empty (shapes that mesh
-    /// empty), all (every latent shape: NAP's retrieval variant).
-    #[arg(long, env = "PHYSNAP_RETRIEVAL", default_value = "auto", value_parser = ["auto", "off", "empty", "all"])]
+    /// empty), all (every latent shape: NAP's retrieval variant), category (every latent shape
+    /// of a category-conditioned sample, from that category's codes; samples without a
+    /// category: as empty).
+    #[arg(long, env = "PHYSNAP_RETRIEVAL", default_value = "auto", value_parser = ["auto", "off", "empty", "all", "category"])]
     retrieval: String,
 }
 
@@ -461,8 +463,10 @@ struct SamplingArgs {
     eta: f64,
     /// Replace part shapes by their nearest training code of the weights' codebook: auto
     /// (empty shapes when the weights have a codebook, else off), off, empty (shapes that mesh
-    /// empty), all (every latent shape: NAP's retrieval variant).
-    #[arg(long, env = "PHYSNAP_RETRIEVAL", default_value = "auto", value_parser = ["auto", "off", "empty", "all"])]
+    /// empty), all (every latent shape: NAP's retrieval variant), category (every latent shape
+    /// of a category-conditioned sample, from that category's codes; samples without a
+    /// category: as empty).
+    #[arg(long, env = "PHYSNAP_RETRIEVAL", default_value = "auto", value_parser = ["auto", "off", "empty", "all", "category"])]
     retrieval: String,
     /// Category guidance.
     #[command(flatten)]

@@ -256,6 +256,11 @@ fn write_codebook(shape: &Path, weights: &Path, check: usize) -> anyhow::Result<
         CODEBOOK_WEIGHTS_FILE,
         weights.display()
     );
+    if !report.categories {
+        println!(
+            "codebook: the codes carry no categories (the shape directory's codebook.json names none; remake it with `physnap train encode`), so --retrieval category is unavailable"
+        );
+    }
     Ok(report)
 }
 
@@ -274,7 +279,9 @@ pub fn retrieval_mode(flag: &str, models: &LoadedModels) -> anyhow::Result<Retri
         (_, Some(_)) => bail!(
             "invalid --retrieval {flag:?}: these weights have no codebook (manifest.json has no \"codebook\" entry); add one with `physnap train codebook` or use --retrieval off"
         ),
-        (_, None) => bail!("invalid --retrieval {flag:?} (must be auto, off, empty or all)"),
+        (_, None) => {
+            bail!("invalid --retrieval {flag:?} (must be auto, off, empty, all or category)")
+        }
     }
 }
 

@@ -199,6 +199,7 @@ fn synth_import_train_generate() {
         &weights.join("codebook.safetensors"),
         rows,
         128,
+        Some(manifest["categories"].as_array().unwrap().len()),
         cb["sha256"].as_str(),
     )
     .unwrap();
@@ -271,6 +272,56 @@ fn synth_import_train_generate() {
             );
         }
     }
+    // --retrieval category: every latent part takes a code of the requested category's
+    // training parts (the codes carry categories: train shape wrote them into the keys).
+    assert_eq!(cb["config"]["categories"], true, "{cb}");
+    let cats = codebook.categories().unwrap();
+    let c = cats[0] as usize;
+    let name = manifest["categories"][c].as_str().unwrap();
+    let gen4 = root.path().join("gen4");
+    ok(&[
+        "generate",
+        "--weights",
+        s(&weights),
+        "--seed",
+        "9",
+        "--resolution",
+        "16",
+        "--category",
+        name,
+        "--retrieval",
+        "category",
+        "--out",
+        s(&gen4),
+    ]);
+    let j = std::fs::read_to_string(gen4.join("sample_000/object.json")).unwrap();
+    let obj = physnap::io::object_json::from_str(&j).unwrap();
+    let mut latent = 0;
+    for p in &obj.parts {
+        if let physnap::shape::PartShape::Latent(code) = &p.shape {
+            let (row, d) = codebook.nearest_in(code, Some(c)).unwrap();
+            assert_eq!(d, 0.0, "{} not retrieved from {name}", p.name);
+            assert_eq!(cats[row] as usize, c);
+            latent += 1;
+        }
+    }
+    assert!(latent >= 1, "{j}");
+    // Without a category it is refused, naming the flag.
+    let o = physnap(&[
+        "generate",
+        "--weights",
+        s(&weights),
+        "--retrieval",
+        "category",
+        "--out",
+        s(&root.path().join("gen5")),
+    ]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        e.contains("retrieval") && e.contains("without a category"),
+        "{e}"
+    );
     // A codebook from another shape prior is refused: its codes would decode to other shapes.
     let other = root.path().join("other_shape");
     std::fs::create_dir_all(&other).unwrap();

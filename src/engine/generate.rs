@@ -8,8 +8,11 @@
 //! Retrieval (method.md §5.9, on codes): with [`Retrieval::Empty`] a part whose decoded shape
 //! meshes empty gets the nearest training code of the weights' codebook instead (1-NN,
 //! Euclidean, raw codes) and is meshed again; [`Retrieval::All`] does that for every latent
-//! part (NAP's retrieval variant). The replaced parts are listed in [`Generated::retrieved`];
-//! `raw` stays the graph the model produced, `object` carries the retrieved codes.
+//! part (NAP's retrieval variant); [`Retrieval::Category`] does it for every latent part of a
+//! category-conditioned sample, searching only the codes of that category's training objects
+//! (physnap's, not in the paper: the requested category then also decides the part shapes).
+//! The replaced parts are listed in [`Generated::retrieved`]; `raw` stays the graph the model
+//! produced, `object` carries the retrieved codes.
 
 use std::ops::ControlFlow;
 
@@ -34,6 +37,9 @@ pub enum Retrieval {
     Empty,
     /// Replace every latent shape (NAP's retrieval variant).
     All,
+    /// Replace every latent shape by the nearest code of the requested category's training
+    /// parts (needs a category and a codebook whose codes carry categories).
+    Category,
 }
 
 impl Retrieval {
@@ -43,15 +49,26 @@ impl Retrieval {
             Retrieval::Off => "off",
             Retrieval::Empty => "empty",
             Retrieval::All => "all",
+            Retrieval::Category => "category",
         }
     }
 
-    /// Parse a wire / flag name (`off`, `empty`, `all`).
+    /// The mode for a sample drawn without a category: `Category` becomes `Empty` (the
+    /// evaluations' mixed runs use it), the others stay.
+    pub fn without_category(self) -> Self {
+        match self {
+            Retrieval::Category => Retrieval::Empty,
+            r => r,
+        }
+    }
+
+    /// Parse a wire / flag name (`off`, `empty`, `all`, `category`).
     pub fn parse(s: &str) -> Option<Self> {
         match s {
             "off" => Some(Retrieval::Off),
             "empty" => Some(Retrieval::Empty),
             "all" => Some(Retrieval::All),
+            "category" => Some(Retrieval::Category),
             _ => None,
         }
     }
@@ -162,6 +179,42 @@ pub fn generate_with(
             value: format!("{:?}", req.retrieval.as_str()),
         });
     }
+    // Category retrieval: a category, codes with categories, and some of that category.
+    let snap_category = match (req.retrieval, shapes.codebook) {
+        (Retrieval::Category, Some(codebook)) => {
+            let invalid = |limit: &str, value: String| EngineError::Invalid {
+                field: "retrieval".into(),
+                limit: limit.into(),
+                value,
+            };
+            let Some(c) = req.category else {
+                return Err(invalid(
+                    "a category with \"category\" (it takes the requested category's codes)",
+                    "\"category\" without a category".into(),
+                ));
+            };
+            if codebook.categories().is_none() {
+                return Err(invalid(
+                    "a codebook whose codes carry categories (manifest codebook.config.categories; rebuild it with `physnap train codebook` from a `train encode` directory)",
+                    "\"category\"".into(),
+                ));
+            }
+            if codebook.rows_of_category(c) == 0 {
+                return Err(EngineError::Invalid {
+                    field: "category".into(),
+                    limit:
+                        "a category with training codes in the codebook (retrieval \"category\")"
+                            .into(),
+                    value: req
+                        .category_name
+                        .clone()
+                        .unwrap_or_else(|| format!("index {c}")),
+                });
+            }
+            Some(c)
+        }
+        _ => None,
+    };
     let device = crate::model::cpu();
     let mut out = Vec::with_capacity(req.samples);
     for i in 0..req.samples {
@@ -203,12 +256,13 @@ pub fn generate_with(
             value: e.to_string(),
         })?;
         let codebook = shapes.codebook.filter(|_| req.retrieval != Retrieval::Off);
-        // All: every latent code is replaced before meshing, so each part is meshed once.
+        // All / Category: every latent code is replaced before meshing, so each part is meshed
+        // once.
         let mut retrieved = match codebook {
-            Some(codebook) if req.retrieval == Retrieval::All => {
+            Some(codebook) if matches!(req.retrieval, Retrieval::All | Retrieval::Category) => {
                 let mut replaced = Vec::new();
                 for (i, part) in object.parts.iter_mut().enumerate() {
-                    if snap_code(i, part, codebook)? {
+                    if snap_code(i, part, codebook, snap_category)? {
                         replaced.push(i);
                     }
                 }
@@ -248,8 +302,9 @@ fn meshing_err(e: crate::error::CoreError) -> EngineError {
     }
 }
 
-/// Replace the latent shapes `mode` selects (empty meshes, or all) by their nearest codebook
-/// code and mesh those parts again; returns the replaced part indices. Parts with analytic
+/// Replace the latent shapes `mode` selects (empty meshes, or all; `Category` acts as `All`
+/// here, there is no category to restrict to) by their nearest codebook code and mesh those
+/// parts again; returns the replaced part indices. Parts with analytic
 /// shapes are left alone. `meshes[i]` must be part i's mesh.
 pub fn retrieve_shapes(
     object: &mut ArticulatedObject,
@@ -267,7 +322,7 @@ pub fn retrieve_shapes(
         if mode == Retrieval::Empty && !mesh.triangles.is_empty() {
             continue;
         }
-        if snap_code(i, part, codebook)? {
+        if snap_code(i, part, codebook, None)? {
             *mesh = part_mesh(part, Some(decoder), meshing).map_err(meshing_err)?;
             replaced.push(i);
         }
@@ -275,16 +330,18 @@ pub fn retrieve_shapes(
     Ok(replaced)
 }
 
-/// Replace part `i`'s latent code by its nearest codebook code; false for analytic shapes.
+/// Replace part `i`'s latent code by its nearest codebook code (among `category`'s codes when
+/// given; the caller has checked that there are some); false for analytic shapes.
 fn snap_code(
     i: usize,
     part: &mut crate::object::Part,
     codebook: &Codebook,
+    category: Option<usize>,
 ) -> Result<bool, EngineError> {
     let PartShape::Latent(code) = &part.shape else {
         return Ok(false);
     };
-    let Some((row, _)) = codebook.nearest(code) else {
+    let Some((row, _)) = codebook.nearest_in(code, category) else {
         return Err(EngineError::Invalid {
             field: format!("part {i} shape code"),
             limit: format!("{} values (the codebook's latent size)", codebook.latent()),
@@ -368,6 +425,102 @@ mod tests {
     }
 
     #[test]
+    fn category_retrieval_takes_every_code_from_the_requested_category() {
+        use crate::model::denoiser::DenoiserConfig;
+        let denoiser = Denoiser::new(
+            &DenoiserConfig {
+                width: 16,
+                layers: 1,
+                head_channels: 8,
+                node_head_hidden: vec![16],
+                edge_head_hidden: vec![16],
+                categories: 3,
+                ..DenoiserConfig::default()
+            },
+            &crate::model::cpu(),
+        )
+        .unwrap();
+        // Sphere codes (radius = first entry): row 0 is category 1, rows 1 and 2 category 2.
+        let row = |r: f32| {
+            let mut c = vec![0.0f32; 128];
+            c[0] = r;
+            c
+        };
+        let codes: Vec<f32> = [row(0.3), row(0.2), row(0.25)].concat();
+        let plain = Codebook::new(128, codes).unwrap();
+        let codebook = plain.clone().with_categories(vec![1, 2, 2], 3).unwrap();
+        let req = |category: Option<usize>| GenerateRequest {
+            samples: 2,
+            steps: 5,
+            category,
+            category_name: category.map(|c| format!("cat{c}")),
+            retrieval: Retrieval::Category,
+            ..Default::default()
+        };
+        let run = |cb: &Codebook, r: &GenerateRequest| {
+            let mut steps = 0;
+            let got = generate(
+                &denoiser,
+                &Spheres,
+                Some(cb),
+                &FeatureScales::default(),
+                &Schedule::default(),
+                r,
+                &mut |_| {
+                    steps += 1;
+                    ControlFlow::Continue(())
+                },
+            );
+            (got, steps)
+        };
+        // The same seeds without retrieval give the model's own codes.
+        let (raw, _) = run(
+            &codebook,
+            &GenerateRequest {
+                retrieval: Retrieval::Off,
+                ..req(Some(2))
+            },
+        );
+        let (got, _) = run(&codebook, &req(Some(2)));
+        for (g, raw) in got.unwrap().iter().zip(raw.unwrap()) {
+            let latent: Vec<usize> = (0..raw.object.parts.len())
+                .filter(|&i| matches!(raw.object.parts[i].shape, PartShape::Latent(_)))
+                .collect();
+            assert!(!latent.is_empty());
+            assert_eq!(g.retrieved, latent, "every latent part is replaced");
+            for &i in &latent {
+                let (PartShape::Latent(code), PartShape::Latent(own)) =
+                    (&g.object.parts[i].shape, &raw.object.parts[i].shape)
+                else {
+                    unreachable!("part {i} is latent in both runs")
+                };
+                let (want, _) = codebook.nearest_in(own, Some(2)).unwrap();
+                assert_eq!(code, codebook.row(want), "part {i}");
+                assert_ne!(code, codebook.row(0), "never a code of category 1");
+            }
+        }
+        // Refused before sampling: no category, codes without categories, a category without
+        // codes.
+        let (e, steps) = run(&codebook, &req(None));
+        let e = e.unwrap_err().to_string();
+        assert!(
+            e.contains("retrieval") && e.contains("without a category"),
+            "{e}"
+        );
+        assert_eq!(steps, 0);
+        let (e, steps) = run(&plain, &req(Some(2)));
+        let e = e.unwrap_err().to_string();
+        assert!(e.contains("carry categories"), "{e}");
+        assert_eq!(steps, 0);
+        let (e, steps) = run(&codebook, &req(Some(0)));
+        let e = e.unwrap_err().to_string();
+        assert!(e.contains("category") && e.contains("cat0"), "{e}");
+        assert_eq!(steps, 0);
+        assert_eq!(Retrieval::Category.without_category(), Retrieval::Empty);
+        assert_eq!(Retrieval::All.without_category(), Retrieval::All);
+    }
+
+    #[test]
     fn retrieval_without_a_codebook_is_refused_before_sampling() {
         use crate::model::denoiser::DenoiserConfig;
         let denoiser = Denoiser::new(
@@ -406,7 +559,12 @@ mod tests {
             "{e}"
         );
         assert_eq!(steps, 0);
-        for r in [Retrieval::Off, Retrieval::Empty, Retrieval::All] {
+        for r in [
+            Retrieval::Off,
+            Retrieval::Empty,
+            Retrieval::All,
+            Retrieval::Category,
+        ] {
             assert_eq!(Retrieval::parse(r.as_str()), Some(r));
         }
         assert_eq!(Retrieval::parse("auto"), None);

@@ -605,15 +605,19 @@ pub fn run_rows(
                         .seed
                         .wrapping_add((c * opts.samples_per_cloud + k) as u64);
                     let sample_started = std::time::Instant::now();
+                    let category = if aware { cloud.category } else { None };
                     let req = GenerateRequest {
                         seed,
                         samples: 1,
-                        category: if aware { cloud.category } else { None },
+                        category,
                         meshing: opts.meshing,
                         guidance: guidance.clone(),
                         sampler: opts.sampler,
                         steps: opts.steps,
-                        retrieval: opts.retrieval,
+                        retrieval: match category {
+                            Some(_) => opts.retrieval,
+                            None => opts.retrieval.without_category(),
+                        },
                         category_guidance: opts.category_guidance,
                         ..Default::default()
                     };

@@ -73,6 +73,10 @@ pub struct CodebookConfig {
     pub candidates: usize,
     /// Meshing resolution of the non-empty check.
     pub check_resolution: usize,
+    /// Whether the file also holds each code's category index (into `categories`), which
+    /// `--retrieval category` needs. Absent in manifests written before it existed (false).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub categories: bool,
 }
 
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
@@ -337,6 +341,7 @@ pub fn load_models(dir: &Path, device: &burn::tensor::Device) -> Result<LoadedMo
             &dir.join(&c.file),
             c.config.rows,
             c.config.latent,
+            c.config.categories.then_some(manifest.categories.len()),
             Some(&c.sha256),
         )?),
     };

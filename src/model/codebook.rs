@@ -12,9 +12,15 @@
 //! Only codes whose decoded SDF meshes non-empty (checked at build time, see
 //! [`Codebook::build`]) enter the codebook, so a retrieved shape is never empty itself.
 //!
-//! On disk: `codebook.safetensors` with one f32 tensor `codes` of shape [rows, latent], listed
-//! in `weights/manifest.json` (file, sha256, rows, latent) and verified on load like the
-//! models.
+//! Codes may carry the category of the training object they came from (one index into the
+//! manifest's category list per row). Then a category-conditioned sample can take its part
+//! shapes from the requested category only ([`Codebook::nearest_in`]; `--retrieval category`),
+//! so a dishwasher sample gets a dishwasher's shell rather than the nearest cabinet's.
+//!
+//! On disk: `codebook.safetensors` with one f32 tensor `codes` of shape [rows, latent] and, when
+//! the codes carry categories, an f32 tensor `categories` of shape [rows] (integral values);
+//! listed in `weights/manifest.json` (file, sha256, rows, latent, categories) and verified on
+//! load like the models.
 
 use std::path::Path;
 
@@ -33,11 +39,20 @@ struct CodebookTensors {
     codes: Param<Tensor<2>>,
 }
 
-/// Training-part codes for nearest-neighbour retrieval (row-major, `rows × latent`).
+/// The codes and their rows' category indices (stored as f32, integral).
+#[derive(Module, Debug)]
+struct CategorisedTensors {
+    codes: Param<Tensor<2>>,
+    categories: Param<Tensor<1>>,
+}
+
+/// Training-part codes for nearest-neighbour retrieval (row-major, `rows × latent`), with the
+/// category index of each row's training object when known.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Codebook {
     latent: usize,
     codes: Vec<f32>,
+    categories: Option<Vec<u32>>,
 }
 
 impl Codebook {
@@ -66,7 +81,50 @@ impl Codebook {
                 format!("{} at row {}", codes[i], i / latent),
             ));
         }
-        Ok(Codebook { latent, codes })
+        Ok(Codebook {
+            latent,
+            codes,
+            categories: None,
+        })
+    }
+
+    /// Attach each row's category index (`categories.len()` must equal the rows, every index
+    /// below `category_count`, the length of the manifest's category list).
+    pub fn with_categories(
+        mut self,
+        categories: Vec<u32>,
+        category_count: usize,
+    ) -> Result<Self, ModelError> {
+        if categories.len() != self.rows() {
+            return Err(ModelError::Config {
+                field: "codebook categories".into(),
+                limit: format!("one per code ({} codes)", self.rows()),
+                value: format!("{} categories", categories.len()),
+            });
+        }
+        if let Some(i) = categories
+            .iter()
+            .position(|&c| c as usize >= category_count)
+        {
+            return Err(ModelError::Config {
+                field: "codebook categories".into(),
+                limit: format!("indices below the category count {category_count}"),
+                value: format!("{} at row {i}", categories[i]),
+            });
+        }
+        self.categories = Some(categories);
+        Ok(self)
+    }
+
+    /// Each row's category index, when the codebook carries them.
+    pub fn categories(&self) -> Option<&[u32]> {
+        self.categories.as_deref()
+    }
+
+    /// Rows of category `category` (0 when the codebook carries no categories).
+    pub fn rows_of_category(&self, category: usize) -> usize {
+        self.categories()
+            .map_or(0, |c| c.iter().filter(|&&k| k as usize == category).count())
     }
 
     /// Keep the rows of `codes` whose decoded SDF meshes non-empty at `check` (parallel over
@@ -128,38 +186,76 @@ impl Codebook {
     /// the wrong length. Ties go to the lower row. Brute force over rows × latent floats (the
     /// shipped codebook: 7,358 × 128), once per retrieved part.
     pub fn nearest(&self, code: &[f32]) -> Option<(usize, f32)> {
+        self.nearest_in(code, None)
+    }
+
+    /// The nearest code to `code` among the rows of `category` (every row when `None`), as
+    /// [`Codebook::nearest`]; `None` also when no row has that category (or the codebook
+    /// carries no categories).
+    pub fn nearest_in(&self, code: &[f32], category: Option<usize>) -> Option<(usize, f32)> {
         if code.len() != self.latent {
             return None;
         }
+        let wanted = |i: usize| match (category, self.categories()) {
+            (None, _) => true,
+            (Some(c), Some(cats)) => cats[i] as usize == c,
+            (Some(_), None) => false,
+        };
         self.codes
             .chunks(self.latent)
-            .map(|row| row.iter().zip(code).map(|(a, b)| (a - b) * (a - b)).sum())
             .enumerate()
+            .filter(|(i, _)| wanted(*i))
+            .map(|(i, row)| {
+                (
+                    i,
+                    row.iter().zip(code).map(|(a, b)| (a - b) * (a - b)).sum(),
+                )
+            })
             .fold(None, |best: Option<(usize, f32)>, (i, d)| match best {
                 Some((_, bd)) if bd <= d => best,
                 _ => Some((i, d)),
             })
     }
 
-    fn tensors(&self, device: &Device) -> CodebookTensors {
-        CodebookTensors {
-            codes: Param::from_data(
-                TensorData::new(self.codes.clone(), [self.rows(), self.latent]),
-                device,
+    fn codes_param(&self, device: &Device) -> Param<Tensor<2>> {
+        Param::from_data(
+            TensorData::new(self.codes.clone(), [self.rows(), self.latent]),
+            device,
+        )
+    }
+
+    /// Save to `path` (safetensors, atomically; with the `categories` tensor when the codebook
+    /// carries categories); returns the file's sha256.
+    pub fn save(&self, path: &Path) -> Result<String, WeightsError> {
+        let device = super::cpu();
+        match &self.categories {
+            None => weights::save(
+                &CodebookTensors {
+                    codes: self.codes_param(&device),
+                },
+                path,
+            ),
+            Some(c) => weights::save(
+                &CategorisedTensors {
+                    codes: self.codes_param(&device),
+                    categories: Param::from_data(
+                        TensorData::new(c.iter().map(|&k| k as f32).collect(), [c.len()]),
+                        &device,
+                    ),
+                },
+                path,
             ),
         }
     }
 
-    /// Save to `path` (safetensors, atomically); returns the file's sha256.
-    pub fn save(&self, path: &Path) -> Result<String, WeightsError> {
-        weights::save(&self.tensors(&super::cpu()), path)
-    }
-
-    /// Load `rows × latent` codes from `path`, verifying `expected_sha256` when given.
+    /// Load `rows × latent` codes from `path`, verifying `expected_sha256` when given; with
+    /// `categories = Some(count)` the file must also hold each row's category index, below
+    /// `count`.
     pub fn load(
         path: &Path,
         rows: usize,
         latent: usize,
+        categories: Option<usize>,
         expected_sha256: Option<&str>,
     ) -> Result<Self, WeightsError> {
         let incompatible = |detail: String| WeightsError::Incompatible {
@@ -172,19 +268,42 @@ impl Codebook {
             )));
         }
         let device = super::cpu();
-        let mut t = Codebook {
+        let empty = Codebook {
             latent,
             codes: vec![0.0; rows * latent],
-        }
-        .tensors(&device);
+            categories: None,
+        };
+        let f32s = |t: TensorData, what: &str| {
+            t.try_into_vec::<f32>()
+                .map_err(|e| incompatible(format!("{what} are not f32: {e:?}")))
+        };
+        let Some(count) = categories else {
+            let mut t = CodebookTensors {
+                codes: empty.codes_param(&device),
+            };
+            weights::load(&mut t, path, expected_sha256)?;
+            let codes = f32s(t.codes.val().into_data(), "codes")?;
+            return Codebook::new(latent, codes).map_err(|e| incompatible(e.to_string()));
+        };
+        let mut t = CategorisedTensors {
+            codes: empty.codes_param(&device),
+            categories: Param::from_data(TensorData::new(vec![0.0f32; rows], [rows]), &device),
+        };
         weights::load(&mut t, path, expected_sha256)?;
-        let codes = t
-            .codes
-            .val()
-            .into_data()
-            .try_into_vec::<f32>()
-            .map_err(|e| incompatible(format!("codes are not f32: {e:?}")))?;
-        Codebook::new(latent, codes).map_err(|e| incompatible(e.to_string()))
+        let codes = f32s(t.codes.val().into_data(), "codes")?;
+        let raw = f32s(t.categories.val().into_data(), "categories")?;
+        if let Some(i) = raw
+            .iter()
+            .position(|v| !(v.is_finite() && *v >= 0.0 && v.fract() == 0.0))
+        {
+            return Err(incompatible(format!(
+                "category of row {i} is {}, not a category index",
+                raw[i]
+            )));
+        }
+        Codebook::new(latent, codes)
+            .and_then(|c| c.with_categories(raw.iter().map(|&v| v as u32).collect(), count))
+            .map_err(|e| incompatible(e.to_string()))
     }
 }
 
@@ -203,6 +322,71 @@ mod tests {
         assert_eq!(i, 0);
         assert!((d - 0.01).abs() < 1e-6);
         assert_eq!(cb.nearest(&[0.0]), None, "wrong length");
+    }
+
+    #[test]
+    fn nearest_in_a_category_searches_only_that_categorys_rows() {
+        let cb = Codebook::new(2, vec![0.0, 0.0, 1.0, 1.0, -1.0, 2.0, 0.9, 0.9])
+            .unwrap()
+            .with_categories(vec![3, 3, 0, 0], 4)
+            .unwrap();
+        assert_eq!(cb.rows_of_category(3), 2);
+        assert_eq!(cb.rows_of_category(1), 0);
+        // Row 3 (category 0) is nearest over all rows; within category 3 it is row 1.
+        assert_eq!(cb.nearest(&[0.92, 0.9]).unwrap().0, 3);
+        assert_eq!(cb.nearest_in(&[0.92, 0.9], Some(3)).unwrap().0, 1);
+        assert_eq!(cb.nearest_in(&[0.92, 0.9], Some(0)).unwrap().0, 3);
+        assert_eq!(cb.nearest_in(&[0.92, 0.9], Some(1)), None, "no rows");
+        let plain = Codebook::new(2, vec![0.0, 0.0]).unwrap();
+        assert_eq!(
+            plain.nearest_in(&[0.0, 0.0], Some(0)),
+            None,
+            "no categories"
+        );
+        let e = Codebook::new(2, vec![0.0; 4])
+            .unwrap()
+            .with_categories(vec![0], 4)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("one per code (2 codes)") && e.contains("1 categories"),
+            "{e}"
+        );
+        let e = Codebook::new(2, vec![0.0; 4])
+            .unwrap()
+            .with_categories(vec![0, 4], 4)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("below the category count 4") && e.contains("4 at row 1"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn categories_round_trip_and_a_file_without_them_is_refused_when_asked_for() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("codebook.safetensors");
+        let cb = Codebook::new(2, vec![0.5, -1.25, 3.0, 1e-7, 2.0, -0.0])
+            .unwrap()
+            .with_categories(vec![2, 0, 45], 46)
+            .unwrap();
+        let sha = cb.save(&path).unwrap();
+        assert_eq!(
+            Codebook::load(&path, 3, 2, Some(46), Some(&sha)).unwrap(),
+            cb
+        );
+        // The indices must fit the manifest's category list.
+        let e = Codebook::load(&path, 3, 2, Some(45), None)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("below the category count 45"), "{e}");
+        let plain = dir.path().join("plain.safetensors");
+        Codebook::new(2, vec![0.0; 6])
+            .unwrap()
+            .save(&plain)
+            .unwrap();
+        assert!(Codebook::load(&plain, 3, 2, Some(46), None).is_err());
     }
 
     #[test]
@@ -255,12 +439,12 @@ mod tests {
         let path = dir.path().join("codebook.safetensors");
         let cb = Codebook::new(3, vec![0.5, -1.25, 3.0, 1e-7, 2.0, -0.0]).unwrap();
         let sha = cb.save(&path).unwrap();
-        assert_eq!(Codebook::load(&path, 2, 3, Some(&sha)).unwrap(), cb);
-        let e = Codebook::load(&path, 3, 3, Some(&sha))
+        assert_eq!(Codebook::load(&path, 2, 3, None, Some(&sha)).unwrap(), cb);
+        let e = Codebook::load(&path, 3, 3, None, Some(&sha))
             .unwrap_err()
             .to_string();
         assert!(e.contains("codebook.safetensors"), "{e}");
-        let e = Codebook::load(&path, 2, 3, Some("00"))
+        let e = Codebook::load(&path, 2, 3, None, Some("00"))
             .unwrap_err()
             .to_string();
         assert!(e.contains("sha256 mismatch"), "{e}");

@@ -93,7 +93,8 @@ pub struct JobRequest {
     pub resolution: Option<u32>,
     /// Replace part shapes by their nearest training code of the weights' codebook: `auto`
     /// (default: `empty` when the weights have a codebook, else `off`), `off`, `empty` (shapes
-    /// that mesh empty) or `all` (NAP's retrieval variant).
+    /// that mesh empty), `all` (NAP's retrieval variant) or `category` (with a category: every
+    /// part takes the nearest code of that category's training parts).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub retrieval: Option<String>,
     /// Classifier-free category guidance w in [0, 20] (jobs with a category only):
@@ -140,7 +141,7 @@ pub struct UploadParams {
     pub preview_every: Option<u32>,
     /// Meshing resolution.
     pub resolution: Option<u32>,
-    /// Codebook retrieval (`auto`, `off`, `empty`, `all`).
+    /// Codebook retrieval (`auto`, `off`, `empty`, `all`, `category`).
     pub retrieval: Option<String>,
     /// Classifier-free category guidance w.
     pub category_guidance: Option<f64>,
@@ -267,7 +268,7 @@ pub struct RequestView {
     pub preview_every: u32,
     /// Meshing resolution.
     pub resolution: u32,
-    /// Codebook retrieval as run: `off`, `empty` or `all` (`auto` resolved).
+    /// Codebook retrieval as run: `off`, `empty`, `all` or `category` (`auto` resolved).
     pub retrieval: String,
     /// Classifier-free category guidance w as run (0 without a category).
     pub category_guidance: f64,

@@ -281,6 +281,11 @@ impl Service {
             conditional: m.denoiser.config.categories > 0,
             schedule_steps: models.schedule.len() as u32,
             codebook: models.loaded.codebook.is_some(),
+            codebook_categories: models.loaded.codebook.as_ref().map_or(Vec::new(), |cb| {
+                (0..m.categories.len())
+                    .filter(|&c| cb.rows_of_category(c) > 0)
+                    .collect()
+            }),
         };
         let (shutdown_tx, _) = watch::channel(false);
         let svc = Arc::new(Service {

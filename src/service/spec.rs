@@ -70,7 +70,7 @@ pub struct JobInput {
     pub preview_every: Option<u32>,
     /// Marching-cubes grid resolution.
     pub resolution: Option<u32>,
-    /// Codebook retrieval of part shapes (`auto`, `off`, `empty`, `all`).
+    /// Codebook retrieval of part shapes (`auto`, `off`, `empty`, `all`, `category`).
     pub retrieval: Option<String>,
     /// Classifier-free category guidance w (with a category only).
     pub category_guidance: Option<f64>,
@@ -125,6 +125,9 @@ pub struct ModelCaps {
     pub schedule_steps: u32,
     /// Whether the weights ship a retrieval codebook.
     pub codebook: bool,
+    /// Category indices that have codes in the codebook (what `retrieval: "category"` can
+    /// use); empty when the codes carry no categories.
+    pub codebook_categories: Vec<usize>,
 }
 
 /// A validated job. Invariants: 16..=100k finite points (per [`Limits`]), a known category for
@@ -168,7 +171,8 @@ pub struct JobSpec {
     pub preview_every: u32,
     /// Marching-cubes resolution.
     pub resolution: u32,
-    /// Codebook retrieval of part shapes: `off`, `empty` or `all` (`auto` is resolved).
+    /// Codebook retrieval of part shapes: `off`, `empty`, `all` or `category` (`auto` is
+    /// resolved).
     pub retrieval: String,
     /// Classifier-free category guidance w (0 without a category).
     pub category_guidance: f64,
@@ -501,7 +505,7 @@ pub fn validate(
             None => {
                 return Err(violation(
                     "retrieval",
-                    "\"auto\", \"off\", \"empty\" or \"all\"",
+                    "\"auto\", \"off\", \"empty\", \"all\" or \"category\"",
                     format!("{r:?}"),
                 ));
             }
@@ -513,6 +517,35 @@ pub fn validate(
                     format!("{r:?}"),
                 ));
             }
+            Some(Retrieval::Category) => match &category {
+                None => {
+                    return Err(violation(
+                        "retrieval",
+                        "a category with \"category\" (it takes the requested category's codes)",
+                        format!("{r:?} without a category"),
+                    ));
+                }
+                Some((c, name)) if !caps.codebook_categories.contains(c) => {
+                    return Err(violation(
+                        "retrieval",
+                        if caps.codebook_categories.is_empty() {
+                            "a codebook whose codes carry categories (these weights' do not)"
+                                .to_string()
+                        } else {
+                            format!(
+                                "a category with training codes in the codebook: {}",
+                                caps.codebook_categories
+                                    .iter()
+                                    .filter_map(|&k| caps.categories.get(k).map(String::as_str))
+                                    .collect::<Vec<_>>()
+                                    .join(", ")
+                            )
+                        },
+                        format!("{r:?} with category {name}"),
+                    ));
+                }
+                Some(_) => r.to_string(),
+            },
             Some(_) => r.to_string(),
         },
     };
@@ -569,6 +602,7 @@ mod tests {
             conditional: true,
             schedule_steps: 1000,
             codebook: true,
+            codebook_categories: vec![1],
         }
     }
 
@@ -659,6 +693,30 @@ mod tests {
         assert!(v.limit.contains("no codebook"), "{v}");
         let s = validate(&input(Some("all")), &caps(), &l, 0).unwrap();
         assert_eq!(s.engine_retrieval(), Retrieval::All);
+        // "category" needs a category that has codes in the codebook.
+        let with = |r: &str, c: Option<&str>| JobInput {
+            category: c.map(str::to_string),
+            ..input(Some(r))
+        };
+        let s = validate(&with("category", Some("Window")), &caps(), &l, 0).unwrap();
+        assert_eq!(s.engine_retrieval(), Retrieval::Category);
+        let v = validate(&with("category", None), &caps(), &l, 0).unwrap_err();
+        assert_eq!(
+            (v.field.as_str(), v.value.as_str()),
+            ("retrieval", "\"category\" without a category")
+        );
+        let v = validate(&with("category", Some("Door")), &caps(), &l, 0).unwrap_err();
+        assert_eq!(v.value, "\"category\" with category Door");
+        assert!(
+            v.limit.contains("training codes in the codebook: Window"),
+            "{v}"
+        );
+        let plain = ModelCaps {
+            codebook_categories: Vec::new(),
+            ..caps()
+        };
+        let v = validate(&with("category", Some("Window")), &plain, &l, 0).unwrap_err();
+        assert!(v.limit.contains("carry categories"), "{v}");
     }
 
     #[test]

@@ -7,6 +7,11 @@
 //! be the one that produced the codes (checked by sha256), or the codes would decode to
 //! unrelated shapes. Writes `codebook.safetensors` and adds its entry to `manifest.json`
 //! (atomically); `train diffusion` runs this at its end, so every new weights directory has one.
+//!
+//! When every training key of the shape directory names its object's category (`train shape`
+//! and `train encode` write it), each kept code also records that category's index in the
+//! manifest's list, for `--retrieval category`; older shape directories give a codebook
+//! without categories.
 
 use std::path::Path;
 use std::time::Instant;
@@ -33,6 +38,8 @@ pub struct CodebookReport {
     pub candidates: usize,
     /// sha256 of `codebook.safetensors`.
     pub sha256: String,
+    /// Whether the codes carry their categories (every training key named a listed category).
+    pub categories: bool,
     /// Wall time, seconds.
     pub seconds: f64,
 }
@@ -78,12 +85,26 @@ pub fn build_codebook(
     let latent = m.shape_prior.config.latent;
     let book = super::shape::read_codebook(shape, latent)?;
     let cols = book.cols;
-    let train: Vec<f32> = book
+    let train_rows: Vec<(&serde_json::Value, &[f32])> = book
         .keys
         .iter()
         .zip(book.codes.chunks_exact(cols))
         .filter(|(k, _)| k["split"] == "train")
+        .collect();
+    let train: Vec<f32> = train_rows
+        .iter()
         .flat_map(|(_, c)| c.iter().copied())
+        .collect();
+    // Each training code's category index, when every key names a listed category.
+    let row_categories: Option<Vec<u32>> = train_rows
+        .iter()
+        .map(|(k, _)| {
+            let name = k["category"].as_str()?;
+            m.categories
+                .iter()
+                .position(|c| c == name)
+                .map(|i| i as u32)
+        })
         .collect();
     let candidates = train.len() / cols;
     if candidates == 0 {
@@ -92,7 +113,13 @@ pub fn build_codebook(
             "no training-split codes",
         ));
     }
-    let (codebook, _) = Codebook::build(latent, &train, &decoder, &check, on_row)?;
+    let (codebook, kept) = Codebook::build(latent, &train, &decoder, &check, on_row)?;
+    let codebook = match &row_categories {
+        Some(cats) => {
+            codebook.with_categories(kept.iter().map(|&i| cats[i]).collect(), m.categories.len())?
+        }
+        None => codebook,
+    };
     let file = weights_dir.join(CODEBOOK_WEIGHTS_FILE);
     let sha256 = codebook.save(&file)?;
     m.codebook = Some(Entry {
@@ -104,6 +131,7 @@ pub fn build_codebook(
             split: "train".into(),
             candidates,
             check_resolution,
+            categories: codebook.categories().is_some(),
         },
     });
     let tmp = manifest_path.with_extension("json.tmp");
@@ -113,6 +141,7 @@ pub fn build_codebook(
         rows: codebook.rows(),
         candidates,
         sha256,
+        categories: codebook.categories().is_some(),
         seconds: started.elapsed().as_secs_f64(),
     })
 }

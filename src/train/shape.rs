@@ -409,6 +409,8 @@ struct PartRef {
     id: String,
     k: usize,
     split: String,
+    /// The object's category name (dataset.json's `category`), when listed.
+    category: Option<String>,
 }
 
 impl PartRef {
@@ -458,11 +460,13 @@ fn read_index(data: &Path) -> Result<Vec<PartRef>, TrainError> {
                 format!("objects[{i}].id {id:?} is not a folder name"),
             ));
         }
+        let category = o["category"].as_str().map(str::to_string);
         for k in 0..n {
             parts.push(PartRef {
                 id: id.to_string(),
                 k,
                 split: split.to_string(),
+                category: category.clone(),
             });
         }
     }
@@ -891,6 +895,7 @@ pub fn encode_object_parts(
             id: id.to_string(),
             k,
             split: String::new(),
+            category: None,
         };
         let (_, pts) = read_rows(&p.file(data, "surface"), 3)?;
         flat.extend(first_points(&pts, surface_points));
@@ -1057,9 +1062,15 @@ fn write_codebook(
         "rows": parts.len(),
         "encoder_input": format!("first {s} points of part<k>_surface.npy (cycled if fewer)"),
         "max_abs": max_abs,
-        "keys": parts.iter().map(|p| json!({
-            "key": format!("{}_{}", p.id, p.k), "object": p.id, "part": p.k, "split": p.split,
-        })).collect::<Vec<_>>(),
+        "keys": parts.iter().map(|p| {
+            let mut key = json!({
+                "key": format!("{}_{}", p.id, p.k), "object": p.id, "part": p.k, "split": p.split,
+            });
+            if let Some(c) = &p.category {
+                key["category"] = json!(c);
+            }
+            key
+        }).collect::<Vec<_>>(),
     });
     write_atomic(
         &out.join(CODEBOOK_INDEX_FILE),

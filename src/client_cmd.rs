@@ -92,6 +92,10 @@ pub struct SubmitArgs {
     /// 0: plain conditioning).
     #[arg(long, env = "PHYSNAP_CATEGORY_GUIDANCE")]
     category_guidance: Option<f64>,
+    /// Joint motions of the result: screw (NAP: both ranges kept) or dominant (each joint
+    /// keeps only its wider range); server default when unset.
+    #[arg(long, env = "PHYSNAP_JOINT_MOTION", value_parser = ["screw", "dominant"])]
+    joint_motion: Option<String>,
     /// Idempotency key (a retry with the same key returns the same job).
     #[arg(long, env = "PHYSNAP_REQUEST_ID", default_value = "")]
     request_id: String,
@@ -171,6 +175,7 @@ pub fn submit(a: SubmitArgs) -> anyhow::Result<()> {
             steps: a.steps,
             retrieval: a.retrieval.clone().unwrap_or_default(),
             category_guidance: a.category_guidance,
+            joint_motion: a.joint_motion.clone().unwrap_or_default(),
             ..Default::default()
         };
         let job = cl

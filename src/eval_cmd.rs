@@ -296,6 +296,12 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
             resolution: a.resolution,
         },
         retrieval,
+        dominant_motion: a.joint_motion == "dominant",
+        sampler: match a.sampler.as_str() {
+            "ddim" => physnap::engine::sample::Sampler::Ddim { eta: a.eta },
+            _ => physnap::engine::sample::Sampler::Ddpm,
+        },
+        steps: a.steps,
         ..Default::default()
     };
     let uncond = sample_set(
@@ -430,11 +436,18 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
         a.weights.display()
     );
     println!(
-        "  references: {} test objects; ID: {} states × {} points; meshing {}³",
+        "  references: {} test objects; ID: {} states × {} points; meshing {}³; joint motion {}; sampler {} ({} steps)",
         refs.len(),
         a.states,
         a.points,
-        a.resolution
+        a.resolution,
+        a.joint_motion,
+        a.sampler,
+        if a.steps == 0 {
+            physnap::engine::schedule::NUM_STEPS
+        } else {
+            a.steps
+        }
     );
     println!(
         "  unconditional: {} samples, valid {:.1}% ({} invalid{})",
@@ -513,6 +526,10 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
         "id": { "states": a.states, "points": a.points },
         "meshing_resolution": a.resolution,
         "retrieval": retrieval.as_str(),
+        "joint_motion": a.joint_motion,
+        "sampler": a.sampler,
+        "steps": if a.steps == 0 { physnap::engine::schedule::NUM_STEPS } else { a.steps },
+        "eta": a.eta,
         "category_guidance": a.category.category_guidance,
         "unconditional": {
             "retrieved_samples": retrieved_samples,

@@ -212,6 +212,20 @@ struct EvalGenerativeArgs {
     /// category: as empty).
     #[arg(long, env = "PHYSNAP_RETRIEVAL", default_value = "auto", value_parser = ["auto", "off", "empty", "all", "category"])]
     retrieval: String,
+    /// Joint motions of the projected samples: screw (NAP: both ranges kept) or dominant
+    /// (each joint keeps only its wider range, in units of the feature scales).
+    #[arg(long, env = "PHYSNAP_JOINT_MOTION", default_value = "screw", value_parser = ["screw", "dominant"])]
+    joint_motion: String,
+    /// Reverse-step rule: ddpm (default here: the paper's sampler, which every generative
+    /// figure uses) or ddim (`generate`'s default).
+    #[arg(long, env = "PHYSNAP_SAMPLER", default_value = "ddpm", value_parser = ["ddpm", "ddim"])]
+    sampler: String,
+    /// Reverse steps (0: all 1000, the paper's; `generate` defaults to 200).
+    #[arg(long, env = "PHYSNAP_STEPS", default_value_t = 0)]
+    steps: usize,
+    /// DDIM noise level η in [0, 1] (ddim only).
+    #[arg(long, env = "PHYSNAP_DDIM_ETA", default_value_t = 0.0)]
+    eta: f64,
 }
 
 #[derive(Subcommand, Debug)]
@@ -468,6 +482,10 @@ struct SamplingArgs {
     /// category: as empty).
     #[arg(long, env = "PHYSNAP_RETRIEVAL", default_value = "auto", value_parser = ["auto", "off", "empty", "all", "category"])]
     retrieval: String,
+    /// Joint motions of the projected samples: screw (NAP: both ranges kept) or dominant
+    /// (each joint keeps only its wider range, in units of the feature scales).
+    #[arg(long, env = "PHYSNAP_JOINT_MOTION", default_value = "screw", value_parser = ["screw", "dominant"])]
+    joint_motion: String,
     /// Category guidance.
     #[command(flatten)]
     category: CategoryGuidanceArgs,

@@ -335,6 +335,7 @@ pub fn generate(a: GenerateArgs) -> anyhow::Result<()> {
         steps: a.sampling.steps,
         retrieval: retrieval_mode(&a.sampling.retrieval, &models)?,
         category_guidance: a.sampling.category.category_guidance,
+        dominant_motion: a.sampling.joint_motion == "dominant",
         ..Default::default()
     };
     req.meshing.validate()?;
@@ -658,6 +659,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         },
         retrieval: retrieval_mode(&a.sampling.retrieval, &models)?,
         category_guidance: a.sampling.category.category_guidance,
+        dominant_motion: a.sampling.joint_motion == "dominant",
     };
     opts.id.validate()?;
     let per_cloud = if a.refs_per_cloud == 0 {

@@ -283,3 +283,47 @@ fn projection_roots_at_the_largest_part() {
     let vmax = back.parts.iter().map(|p| p.volume()).fold(0.0, f64::max);
     assert_eq!(back.parts[root].volume(), vmax);
 }
+
+#[test]
+fn dominant_motion_keeps_the_wider_range_in_its_unit_and_never_makes_a_screw() {
+    use physnap::graph::ProjectOptions;
+    let mut obj: ArticulatedObject = physnap::fixtures::cabinet();
+    let k = obj.joints.len() - 1;
+    obj.joints[k].kind = JointKind::Screw;
+    obj.joints[k].revolute = [0.0, 1.0];
+    obj.joints[k].prismatic = [0.0, 0.1];
+    obj.validate().unwrap();
+    let slots: Vec<usize> = (0..obj.parts.len()).collect();
+    let g = encode(&obj, &slots).unwrap();
+    let joint = |o: &ArticulatedObject| {
+        let (p, c) = (obj.joints[k].parent, obj.joints[k].child);
+        o.joints
+            .iter()
+            .find(|j| (j.parent, j.child) == (p, c) || (j.parent, j.child) == (c, p))
+            .unwrap()
+            .clone()
+    };
+    // NAP: both ranges survive, a screw.
+    assert_eq!(
+        joint(&project(&g, &Default::default()).unwrap()).kind,
+        JointKind::Screw
+    );
+    let with = |units| ProjectOptions {
+        dominant_motion: Some(units),
+        ..Default::default()
+    };
+    // 1 rad / 2π = 0.16 against 0.1 m / 1 m = 0.1: the rotation wins.
+    let j = joint(&project(&g, &with([std::f64::consts::TAU, 1.0])).unwrap());
+    assert_eq!((j.kind, j.prismatic), (JointKind::Revolute, [0.0, 0.0]));
+    assert!((j.revolute[1] - 1.0).abs() < 1e-6, "{:?}", j.revolute);
+    // In units where 0.1 m is the larger motion, the slide wins.
+    let j = joint(&project(&g, &with([10.0, 0.5])).unwrap());
+    assert_eq!((j.kind, j.revolute), (JointKind::Prismatic, [0.0, 0.0]));
+    assert!((j.prismatic[1] - 0.1).abs() < 1e-6, "{:?}", j.prismatic);
+    // Noise graphs: never a screw, and the object stays valid.
+    for seed in 0..20 {
+        let o = project(&gaussian_graph(seed, 1.0), &with([1.0, 1.0])).unwrap();
+        o.validate().unwrap();
+        assert!(o.joints.iter().all(|j| j.kind != JointKind::Screw));
+    }
+}

@@ -162,6 +162,18 @@ async fn submit_watch_get_artifact() {
         "{}",
         e.message()
     );
+    // joint_motion reaches the same validation as REST.
+    let mut motion = spec(flat.clone());
+    motion.joint_motion = "revolute".into();
+    let e = cl
+        .submit_job(pb::SubmitJobRequest {
+            spec: Some(motion),
+            request_id: String::new(),
+        })
+        .await
+        .unwrap_err();
+    assert_eq!(e.code(), tonic::Code::InvalidArgument);
+    assert_eq!(e.metadata().get("physnap-field").unwrap(), "joint_motion");
     let mut cat = spec(flat.clone());
     cat.category = "Spaceship".into();
     let e = cl

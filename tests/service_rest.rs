@@ -748,7 +748,8 @@ async fn guided_ddim_job_streams_losses_and_ranks_best_of_n() {
         &s.url("/v1/jobs"),
         json!({"points": points_json(64), "seed": 3, "samples": 2, "resolution": 8,
                "sampler": "ddim", "eta": 0.0, "steps": 20, "n_g": 10, "w_pc": 15.0,
-               "tau": 1000.0, "preview_every": 1, "guidance_max_step": 0.05}),
+               "tau": 1000.0, "preview_every": 1, "guidance_max_step": 0.05,
+               "joint_motion": "dominant"}),
     )
     .await;
     assert_eq!(r.status(), 202);
@@ -768,6 +769,7 @@ async fn guided_ddim_job_streams_losses_and_ranks_best_of_n() {
     assert_eq!(req["retrieval"], "off", "{req}");
     // No category: no category guidance.
     assert_eq!(req["category_guidance"].as_f64(), Some(0.0), "{req}");
+    assert_eq!(req["joint_motion"], "dominant", "{req}");
     // Unset weights follow the paper's rule: w_pen = w_mob = 2 / 3.
     assert!(
         (req["w_pen"].as_f64().unwrap() - 2.0 / 3.0).abs() < 1e-12,
@@ -833,6 +835,7 @@ async fn guided_ddim_job_streams_losses_and_ranks_best_of_n() {
     assert_eq!(ranking["guidance"]["n_g"], 10);
     assert_eq!(ranking["guidance"]["refine_steps"], 10);
     assert_eq!(ranking["retrieval"], "off");
+    assert_eq!(ranking["joint_motion"], "dominant");
     let rows = ranking["samples"].as_array().unwrap();
     assert_eq!(rows.len(), 2, "{ranking:#}");
     let d: Vec<f64> = rows.iter().map(|r| r["d_pc"].as_f64().unwrap()).collect();
@@ -855,6 +858,10 @@ async fn guided_ddim_job_streams_losses_and_ranks_best_of_n() {
         model["name"].as_str().unwrap(),
         format!("sample_{:03}", rows[0]["index"].as_u64().unwrap())
     );
+    // joint_motion "dominant": every joint rotates, slides or is fixed, none is a screw.
+    let joints = model["joints"].as_array().unwrap();
+    assert!(!joints.is_empty(), "{model}");
+    assert!(joints.iter().all(|j| j["type"] != "screw"), "{model}");
     s.shutdown().await;
 }
 
@@ -878,6 +885,11 @@ async fn guidance_and_sampler_fields_are_validated() {
         ),
         (json!({"refine_steps": 1001}), "refine_steps", "1001"),
         (json!({"retrieval": "nearest"}), "retrieval", "\"nearest\""),
+        (
+            json!({"joint_motion": "revolute"}),
+            "joint_motion",
+            "\"revolute\"",
+        ),
         // The test weights have no codebook: only off / auto are possible.
         (json!({"retrieval": "empty"}), "retrieval", "\"empty\""),
         (

@@ -113,6 +113,9 @@ pub struct GenerateRequest {
     pub retrieval: Retrieval,
     /// Classifier-free category guidance weight; see [`SampleRequest::category_guidance`].
     pub category_guidance: f64,
+    /// Keep one motion per joint (see [`ProjectOptions::dominant_motion`]), comparing the range
+    /// widths in units of the range channels' feature scales; false: NAP's screws.
+    pub dominant_motion: bool,
 }
 
 /// One generated sample.
@@ -247,6 +250,7 @@ pub fn generate_with(
             &ProjectOptions {
                 name: format!("sample_{i:03}"),
                 category: req.category_name.clone(),
+                dominant_motion: req.dominant_motion.then(|| range_units(scales)),
                 ..Default::default()
             },
         )
@@ -292,6 +296,21 @@ pub fn generate_with(
         });
     }
     Ok(out)
+}
+
+/// The units [rad, m] in which [`GenerateRequest::dominant_motion`] compares a joint's two range
+/// widths: the larger feature scale of each range's two channels (the model's own sense of a
+/// "typical" range; 1 where a scale is missing or degenerate).
+pub fn range_units(scales: &FeatureScales) -> [f64; 2] {
+    use crate::graph::edge_ch;
+    let unit = |c: usize| {
+        let s = scales
+            .edge
+            .get(c..c + 2)
+            .map_or(0.0, |s| s[0].abs().max(s[1].abs()) as f64);
+        if s.is_finite() && s > 1e-6 { s } else { 1.0 }
+    };
+    [unit(edge_ch::REVOLUTE), unit(edge_ch::PRISMATIC)]
 }
 
 fn meshing_err(e: crate::error::CoreError) -> EngineError {
@@ -424,22 +443,27 @@ mod tests {
         );
     }
 
-    #[test]
-    fn category_retrieval_takes_every_code_from_the_requested_category() {
+    /// A one-layer denoiser with `categories` categories (untrained: seeded init).
+    fn tiny_denoiser(categories: usize) -> Denoiser {
         use crate::model::denoiser::DenoiserConfig;
-        let denoiser = Denoiser::new(
+        Denoiser::new(
             &DenoiserConfig {
                 width: 16,
                 layers: 1,
                 head_channels: 8,
                 node_head_hidden: vec![16],
                 edge_head_hidden: vec![16],
-                categories: 3,
+                categories,
                 ..DenoiserConfig::default()
             },
             &crate::model::cpu(),
         )
-        .unwrap();
+        .unwrap()
+    }
+
+    #[test]
+    fn category_retrieval_takes_every_code_from_the_requested_category() {
+        let denoiser = tiny_denoiser(3);
         // Sphere codes (radius = first entry): row 0 is category 1, rows 1 and 2 category 2.
         let row = |r: f32| {
             let mut c = vec![0.0f32; 128];
@@ -522,19 +546,7 @@ mod tests {
 
     #[test]
     fn retrieval_without_a_codebook_is_refused_before_sampling() {
-        use crate::model::denoiser::DenoiserConfig;
-        let denoiser = Denoiser::new(
-            &DenoiserConfig {
-                width: 16,
-                layers: 1,
-                head_channels: 8,
-                node_head_hidden: vec![16],
-                edge_head_hidden: vec![16],
-                ..DenoiserConfig::default()
-            },
-            &crate::model::cpu(),
-        )
-        .unwrap();
+        let denoiser = tiny_denoiser(crate::data::categories::CATEGORIES.len());
         let mut steps = 0;
         let e = generate(
             &denoiser,

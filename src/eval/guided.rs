@@ -269,6 +269,8 @@ pub struct TableOptions {
     pub retrieval: Retrieval,
     /// Classifier-free category guidance of the category-aware rows.
     pub category_guidance: f64,
+    /// Keep one motion per joint; see [`GenerateRequest::dominant_motion`].
+    pub dominant_motion: bool,
 }
 
 /// One row of Table 1: medians over all samples of all clouds.
@@ -619,6 +621,7 @@ pub fn run_rows(
                             None => opts.retrieval.without_category(),
                         },
                         category_guidance: opts.category_guidance,
+                        dominant_motion: opts.dominant_motion,
                         ..Default::default()
                     };
                     let shapes = PartShapes {
@@ -902,6 +905,7 @@ mod tests {
             id: IdOptions::default(),
             retrieval: Retrieval::Off,
             category_guidance: 0.0,
+            dominant_motion: false,
         };
         let mut calls = 0;
         let rows = guided_table(

@@ -10,9 +10,11 @@
 //!    deterministic and always has n − 1 edges;
 //! 3. edge class 1 if c̃₁ ≥ c̃₂ else 2; the decoded line is ±(l, m) accordingly;
 //! 4. Plücker projection: l ← l/‖l‖, m ← m − (l·m) l;
-//! 5. ranges are sorted into [lower, upper] (a reversed interval holds the same states); the
-//!    joint type comes from which range is wider than [`JOINT_RANGE_TOL`], and the inactive
-//!    range is zeroed;
+//! 5. ranges are sorted into [lower, upper] (a reversed interval holds the same states); with
+//!    [`ProjectOptions::dominant_motion`] (physnap's, not NAP's) only the range that is wider in
+//!    its unit survives — the other is zeroed — so no joint is a screw; then the joint type
+//!    comes from which range is wider than [`JOINT_RANGE_TOL`], and the inactive range is
+//!    zeroed;
 //! 6. the root is the part with the largest box volume (method.md §6.2); tree edges are
 //!    oriented away from it, negating the line when the child is the lower slot (reversal
 //!    identity, see [`crate::kinematics`]);
@@ -40,6 +42,14 @@ pub struct ProjectOptions {
     pub name: String,
     /// Category of the produced object.
     pub category: Option<String>,
+    /// Keep one motion per joint: units `[revolute (rad), prismatic (m)]` the two range widths
+    /// are divided by before comparing; the narrower range is zeroed. None: NAP, every joint a
+    /// screw with both ranges. Why: the training data have no screw joints (every joint
+    /// rotates, slides or is fixed), but a sample's inactive range keeps a residue of the
+    /// model's noise; unscaled by the range channel's feature scale (2π for rotation) that
+    /// residue is tenths of a radian, far above [`JOINT_RANGE_TOL`], so nearly every sampled
+    /// joint came out a screw. Generation passes the range channels' feature scales.
+    pub dominant_motion: Option<[f64; 2]>,
 }
 
 impl Default for ProjectOptions {
@@ -49,6 +59,7 @@ impl Default for ProjectOptions {
             min_half_extent: 1e-4,
             name: "object".into(),
             category: None,
+            dominant_motion: None,
         }
     }
 }
@@ -167,6 +178,13 @@ pub fn project(g: &GraphTensor, opts: &ProjectOptions) -> CoreResult<Articulated
             };
             reached[child] = true;
             queue.push_back(child);
+            let (rev, pri) = match opts.dominant_motion {
+                Some([ur, up]) if (rev[1] - rev[0]) / ur >= (pri[1] - pri[0]) / up => {
+                    (rev, [0.0, 0.0])
+                }
+                Some(_) => ([0.0, 0.0], pri),
+                None => (rev, pri),
+            };
             let kind = JointKind::from_ranges(rev, pri);
             let origin = line.closest_point_to(&Point3::from(parts[child].center));
             joints.push(Joint {

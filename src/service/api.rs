@@ -101,6 +101,12 @@ pub struct JobRequest {
     /// ε̂ = ε̂(c) + w·(ε̂(c) − ε̂(∅)). Default 2 with a category; 0 = plain conditioning.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub category_guidance: Option<f64>,
+    /// Joint motions of the result: `screw` (NAP: each joint keeps its rotation and
+    /// translation ranges; URDF screws need a helper link) or `dominant` (each joint keeps only
+    /// the wider range, in units of the model's feature scales: plain revolute and prismatic
+    /// joints). Default `screw`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joint_motion: Option<String>,
 }
 
 /// Query parameters of a raw upload (`POST /v1/jobs` with a PLY, NPY or f32le body): the same
@@ -145,6 +151,8 @@ pub struct UploadParams {
     pub retrieval: Option<String>,
     /// Classifier-free category guidance w.
     pub category_guidance: Option<f64>,
+    /// Joint motions (`screw`, `dominant`).
+    pub joint_motion: Option<String>,
 }
 
 impl JobRequest {
@@ -200,6 +208,7 @@ impl JobRequest {
             resolution: self.resolution,
             retrieval: self.retrieval,
             category_guidance: self.category_guidance,
+            joint_motion: self.joint_motion,
         })
     }
 }
@@ -227,6 +236,7 @@ impl UploadParams {
             resolution: self.resolution,
             retrieval: self.retrieval,
             category_guidance: self.category_guidance,
+            joint_motion: self.joint_motion,
         }
     }
 }
@@ -272,6 +282,8 @@ pub struct RequestView {
     pub retrieval: String,
     /// Classifier-free category guidance w as run (0 without a category).
     pub category_guidance: f64,
+    /// Joint motions as run: `screw` or `dominant`.
+    pub joint_motion: String,
     /// Whether guidance is applied (some weight > 0); false = plain NAP sampling.
     pub guided: bool,
 }
@@ -489,6 +501,7 @@ pub fn request_view(s: &JobSpec) -> RequestView {
         resolution: s.resolution,
         retrieval: s.retrieval.clone(),
         category_guidance: s.category_guidance,
+        joint_motion: s.joint_motion.clone(),
         guided: s.guided(),
     }
 }

@@ -74,7 +74,16 @@ pub struct JobInput {
     pub retrieval: Option<String>,
     /// Classifier-free category guidance w (with a category only).
     pub category_guidance: Option<f64>,
+    /// Joint motions of the result: `screw` or `dominant` (see [`JobSpec::joint_motion`]).
+    pub joint_motion: Option<String>,
 }
+
+/// Each joint keeps both ranges (NAP: every joint a screw).
+pub const JOINT_MOTION_SCREW: &str = "screw";
+/// Each joint keeps only its wider range (in units of the feature scales).
+pub const JOINT_MOTION_DOMINANT: &str = "dominant";
+/// The joint motion of a job that names none.
+pub const DEFAULT_JOINT_MOTION: &str = JOINT_MOTION_SCREW;
 
 /// NAP's DDPM (strided ancestral sampling when fewer steps than the schedule are asked for).
 pub const SAMPLER_DDPM: &str = "ddpm";
@@ -176,6 +185,9 @@ pub struct JobSpec {
     pub retrieval: String,
     /// Classifier-free category guidance w (0 without a category).
     pub category_guidance: f64,
+    /// `screw` (NAP: each joint keeps its rotation and translation ranges) or `dominant` (each
+    /// joint keeps only the wider one, so exported joints are plain revolute / prismatic).
+    pub joint_motion: String,
 }
 
 /// Largest τ accepted (the engine's limit).
@@ -185,6 +197,11 @@ impl JobSpec {
     /// Whether any guidance weight is positive (otherwise the job samples unguided).
     pub fn guided(&self) -> bool {
         self.w_pc > 0.0 || self.w_pen > 0.0 || self.w_mob > 0.0
+    }
+
+    /// Whether the engine keeps one motion per joint.
+    pub fn dominant_motion(&self) -> bool {
+        self.joint_motion == JOINT_MOTION_DOMINANT
     }
 
     /// The engine's retrieval mode (an unknown name, impossible after [`validate`], is `Off`).
@@ -549,6 +566,17 @@ pub fn validate(
             Some(_) => r.to_string(),
         },
     };
+    let joint_motion = match input.joint_motion.as_deref().filter(|m| !m.is_empty()) {
+        None => DEFAULT_JOINT_MOTION.to_string(),
+        Some(m) if m == JOINT_MOTION_SCREW || m == JOINT_MOTION_DOMINANT => m.to_string(),
+        Some(m) => {
+            return Err(violation(
+                "joint_motion",
+                format!("\"{JOINT_MOTION_SCREW}\" or \"{JOINT_MOTION_DOMINANT}\""),
+                format!("{m:?}"),
+            ));
+        }
+    };
     // Classifier-free category guidance: the default with a category, 0 without one.
     let category_guidance = match (input.category_guidance, &category) {
         (Some(w), _) if !(w.is_finite() && (0.0..=MAX_CATEGORY_GUIDANCE).contains(&w)) => {
@@ -589,6 +617,7 @@ pub fn validate(
         resolution,
         retrieval,
         category_guidance,
+        joint_motion,
     })
 }
 
@@ -717,6 +746,27 @@ mod tests {
         };
         let v = validate(&with("category", Some("Window")), &plain, &l, 0).unwrap_err();
         assert!(v.limit.contains("carry categories"), "{v}");
+    }
+
+    #[test]
+    fn joint_motion_defaults_and_a_bad_name_is_refused() {
+        let input = |m: Option<&str>| JobInput {
+            points: Some(cloud(16)),
+            joint_motion: m.map(str::to_string),
+            ..Default::default()
+        };
+        let l = Limits::default();
+        let run = |m| validate(&input(m), &caps(), &l, 0);
+        assert_eq!(run(None).unwrap().joint_motion, DEFAULT_JOINT_MOTION);
+        assert_eq!(run(Some("")).unwrap().joint_motion, DEFAULT_JOINT_MOTION);
+        let s = run(Some("dominant")).unwrap();
+        assert!(s.dominant_motion());
+        assert!(!run(Some("screw")).unwrap().dominant_motion());
+        let v = run(Some("revolute")).unwrap_err();
+        assert_eq!(
+            (v.field.as_str(), v.limit.as_str(), v.value.as_str()),
+            ("joint_motion", "\"screw\" or \"dominant\"", "\"revolute\"")
+        );
     }
 
     #[test]

@@ -180,6 +180,13 @@ struct SpecDoc {
     /// Rows written before category guidance existed ran without it.
     #[serde(default)]
     category_guidance: f64,
+    /// Rows written before joint motions could be chosen kept NAP's screws.
+    #[serde(default = "joint_motion_screw")]
+    joint_motion: String,
+}
+
+fn joint_motion_screw() -> String {
+    super::spec::JOINT_MOTION_SCREW.into()
 }
 
 fn retrieval_off() -> String {
@@ -206,6 +213,7 @@ fn spec_to_row(s: &JobSpec) -> (String, Vec<u8>) {
         resolution: s.resolution,
         retrieval: s.retrieval.clone(),
         category_guidance: s.category_guidance,
+        joint_motion: s.joint_motion.clone(),
     };
     let mut blob = Vec::with_capacity(s.points.len() * 12);
     for p in &s.points {
@@ -250,6 +258,7 @@ fn spec_from_row(id: &str, json: &str, blob: &[u8]) -> Result<JobSpec, StoreErro
         resolution: d.resolution,
         retrieval: d.retrieval,
         category_guidance: d.category_guidance,
+        joint_motion: d.joint_motion,
     })
 }
 

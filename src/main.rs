@@ -212,8 +212,9 @@ struct EvalGenerativeArgs {
     /// category: as empty).
     #[arg(long, env = "PHYSNAP_RETRIEVAL", default_value = "auto", value_parser = ["auto", "off", "empty", "all", "category"])]
     retrieval: String,
-    /// Joint motions of the projected samples: screw (NAP: both ranges kept) or dominant
-    /// (each joint keeps only its wider range, in units of the feature scales).
+    /// Joint motions of the projected samples: screw (default here: NAP's protocol, which the
+    /// manifest's figures use; both ranges kept) or dominant (`generate`'s default: each joint
+    /// keeps only its wider range, in units of the feature scales).
     #[arg(long, env = "PHYSNAP_JOINT_MOTION", default_value = "screw", value_parser = ["screw", "dominant"])]
     joint_motion: String,
     /// Reverse-step rule: ddpm (default here: the paper's sampler, which every generative
@@ -482,9 +483,10 @@ struct SamplingArgs {
     /// category: as empty).
     #[arg(long, env = "PHYSNAP_RETRIEVAL", default_value = "auto", value_parser = ["auto", "off", "empty", "all", "category"])]
     retrieval: String,
-    /// Joint motions of the projected samples: screw (NAP: both ranges kept) or dominant
-    /// (each joint keeps only its wider range, in units of the feature scales).
-    #[arg(long, env = "PHYSNAP_JOINT_MOTION", default_value = "screw", value_parser = ["screw", "dominant"])]
+    /// Joint motions of the projected samples: dominant (default: each joint keeps only its
+    /// wider range, in units of the feature scales, so it rotates, slides or is fixed) or
+    /// screw (NAP: both ranges kept).
+    #[arg(long, env = "PHYSNAP_JOINT_MOTION", default_value = "dominant", value_parser = ["screw", "dominant"])]
     joint_motion: String,
     /// Category guidance.
     #[command(flatten)]

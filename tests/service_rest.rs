@@ -748,8 +748,7 @@ async fn guided_ddim_job_streams_losses_and_ranks_best_of_n() {
         &s.url("/v1/jobs"),
         json!({"points": points_json(64), "seed": 3, "samples": 2, "resolution": 8,
                "sampler": "ddim", "eta": 0.0, "steps": 20, "n_g": 10, "w_pc": 15.0,
-               "tau": 1000.0, "preview_every": 1, "guidance_max_step": 0.05,
-               "joint_motion": "dominant"}),
+               "tau": 1000.0, "preview_every": 1, "guidance_max_step": 0.05}),
     )
     .await;
     assert_eq!(r.status(), 202);
@@ -769,6 +768,7 @@ async fn guided_ddim_job_streams_losses_and_ranks_best_of_n() {
     assert_eq!(req["retrieval"], "off", "{req}");
     // No category: no category guidance.
     assert_eq!(req["category_guidance"].as_f64(), Some(0.0), "{req}");
+    // The default joint motion: one per joint.
     assert_eq!(req["joint_motion"], "dominant", "{req}");
     // Unset weights follow the paper's rule: w_pen = w_mob = 2 / 3.
     assert!(

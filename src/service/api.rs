@@ -104,7 +104,7 @@ pub struct JobRequest {
     /// Joint motions of the result: `screw` (NAP: each joint keeps its rotation and
     /// translation ranges; URDF screws need a helper link) or `dominant` (each joint keeps only
     /// the wider range, in units of the model's feature scales: plain revolute and prismatic
-    /// joints). Default `screw`.
+    /// joints). Default `dominant`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub joint_motion: Option<String>,
 }

@@ -83,7 +83,7 @@ pub const JOINT_MOTION_SCREW: &str = "screw";
 /// Each joint keeps only its wider range (in units of the feature scales).
 pub const JOINT_MOTION_DOMINANT: &str = "dominant";
 /// The joint motion of a job that names none.
-pub const DEFAULT_JOINT_MOTION: &str = JOINT_MOTION_SCREW;
+pub const DEFAULT_JOINT_MOTION: &str = JOINT_MOTION_DOMINANT;
 
 /// NAP's DDPM (strided ancestral sampling when fewer steps than the schedule are asked for).
 pub const SAMPLER_DDPM: &str = "ddpm";

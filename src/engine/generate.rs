@@ -13,6 +13,11 @@
 //! (physnap's, not in the paper: the requested category then also decides the part shapes).
 //! The replaced parts are listed in [`Generated::retrieved`]; `raw` stays the graph the model
 //! produced, `object` carries the retrieved codes.
+//!
+//! Joint motions: with [`GenerateRequest::dominant_motion`] the projection keeps only each
+//! joint's wider range, compared in units of the range channels' feature scales
+//! ([`range_units`]); the engine's default is NAP's (every joint a screw), the CLI and the
+//! service default to dominant.
 
 use std::ops::ControlFlow;
 

@@ -746,6 +746,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         "guidance_max_step": opts.max_step, "guidance_refine_steps": opts.refine_steps,
         "sampler": a.sampling.sampler, "steps": a.sampling.steps, "eta": a.sampling.eta,
         "category_guidance": a.sampling.category.category_guidance,
+        "retrieval": opts.retrieval.as_str(), "joint_motion": a.sampling.joint_motion,
         "statistic": "E_* and D_pc: median over all samples; MMD and 1-NNA: per cloud (its samples vs its references), median over clouds",
         "references": a.data.as_ref().map(|d| serde_json::json!({
             "data": d.display().to_string(), "per_cloud": per_cloud,

@@ -296,11 +296,8 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
             resolution: a.resolution,
         },
         retrieval,
-        dominant_motion: a.joint_motion == "dominant",
-        sampler: match a.sampler.as_str() {
-            "ddim" => physnap::engine::sample::Sampler::Ddim { eta: a.eta },
-            _ => physnap::engine::sample::Sampler::Ddpm,
-        },
+        joint_motion: super::model_cmd::joint_motion(&a.joint_motion)?,
+        sampler: super::model_cmd::sampler(&a.sampler, a.eta),
         steps: a.steps,
         ..Default::default()
     };
@@ -430,6 +427,12 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
     // the category references) shares its category.
     let ref_acc = physnap::eval::generative::loo_label_accuracy(&d_cc, &cat_ref_cats);
 
+    // Reverse steps as run (0 asks for the whole schedule).
+    let steps_run = if a.steps == 0 {
+        physnap::engine::schedule::NUM_STEPS
+    } else {
+        a.steps
+    };
     println!(
         "generative evaluation ({} order) of {}",
         a.order,
@@ -443,11 +446,7 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
         a.resolution,
         a.joint_motion,
         a.sampler,
-        if a.steps == 0 {
-            physnap::engine::schedule::NUM_STEPS
-        } else {
-            a.steps
-        }
+        steps_run
     );
     println!(
         "  unconditional: {} samples, valid {:.1}% ({} invalid{})",
@@ -528,7 +527,7 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
         "retrieval": retrieval.as_str(),
         "joint_motion": a.joint_motion,
         "sampler": a.sampler,
-        "steps": if a.steps == 0 { physnap::engine::schedule::NUM_STEPS } else { a.steps },
+        "steps": steps_run,
         "eta": a.eta,
         "category_guidance": a.category.category_guidance,
         "unconditional": {

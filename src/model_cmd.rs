@@ -8,7 +8,7 @@ use anyhow::{Context, bail};
 use physnap::data::categories::category_index;
 use physnap::engine::EngineError;
 use physnap::engine::generate::{
-    GenerateRequest, PartShapes, Retrieval, generate_with as run_generate,
+    GenerateRequest, JointMotion, PartShapes, Retrieval, generate_with as run_generate,
 };
 use physnap::engine::guidance::{GuidanceOptions, SdfField, Terms};
 use physnap::engine::sample::Sampler;
@@ -285,6 +285,20 @@ pub fn retrieval_mode(flag: &str, models: &LoadedModels) -> anyhow::Result<Retri
     }
 }
 
+/// The `--joint-motion` flag.
+pub fn joint_motion(flag: &str) -> anyhow::Result<JointMotion> {
+    JointMotion::parse(flag)
+        .with_context(|| format!("invalid --joint-motion {flag:?} (must be screw or dominant)"))
+}
+
+/// The `--sampler` / `--eta` flags (`ddim` or `ddpm`; clap has checked the name).
+pub fn sampler(name: &str, eta: f64) -> Sampler {
+    match name {
+        "ddim" => Sampler::Ddim { eta },
+        _ => Sampler::Ddpm,
+    }
+}
+
 pub fn generate(a: GenerateArgs) -> anyhow::Result<()> {
     let manifest_path = a.weights.join("manifest.json");
     if !manifest_path.is_file() {
@@ -316,12 +330,7 @@ pub fn generate(a: GenerateArgs) -> anyhow::Result<()> {
         bail!("invalid --samples: 0 (must be at least 1)");
     }
     let guidance = guidance_options(&a)?;
-    let sampler = match a.sampling.sampler.as_str() {
-        "ddim" => Sampler::Ddim {
-            eta: a.sampling.eta,
-        },
-        _ => Sampler::Ddpm,
-    };
+    let sampler = sampler(&a.sampling.sampler, a.sampling.eta);
     let req = GenerateRequest {
         seed: a.seed,
         samples: a.samples,
@@ -335,7 +344,7 @@ pub fn generate(a: GenerateArgs) -> anyhow::Result<()> {
         steps: a.sampling.steps,
         retrieval: retrieval_mode(&a.sampling.retrieval, &models)?,
         category_guidance: a.sampling.category.category_guidance,
-        dominant_motion: a.sampling.joint_motion == "dominant",
+        joint_motion: joint_motion(&a.sampling.joint_motion)?,
         ..Default::default()
     };
     req.meshing.validate()?;
@@ -644,12 +653,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         tau: a.sampling.tau,
         max_step: super::max_step(a.sampling.guidance_max_step),
         refine_steps: a.sampling.guidance_refine_steps,
-        sampler: match a.sampling.sampler.as_str() {
-            "ddim" => Sampler::Ddim {
-                eta: a.sampling.eta,
-            },
-            _ => Sampler::Ddpm,
-        },
+        sampler: sampler(&a.sampling.sampler, a.sampling.eta),
         steps: a.sampling.steps,
         meshing,
         references: Vec::new(),
@@ -659,7 +663,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         },
         retrieval: retrieval_mode(&a.sampling.retrieval, &models)?,
         category_guidance: a.sampling.category.category_guidance,
-        dominant_motion: a.sampling.joint_motion == "dominant",
+        joint_motion: joint_motion(&a.sampling.joint_motion)?,
     };
     opts.id.validate()?;
     let per_cloud = if a.refs_per_cloud == 0 {

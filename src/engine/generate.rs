@@ -14,10 +14,10 @@
 //! The replaced parts are listed in [`Generated::retrieved`]; `raw` stays the graph the model
 //! produced, `object` carries the retrieved codes.
 //!
-//! Joint motions: with [`GenerateRequest::dominant_motion`] the projection keeps only each
-//! joint's wider range, compared in units of the range channels' feature scales
-//! ([`range_units`]); the engine's default is NAP's (every joint a screw), the CLI and the
-//! service default to dominant.
+//! Joint motions: with [`JointMotion::Dominant`] the projection keeps only each joint's wider
+//! range, compared in units of the range channels' feature scales ([`range_units`]); the
+//! engine's default is NAP's (every joint a screw), the CLI and the service default to
+//! dominant.
 
 use std::ops::ControlFlow;
 
@@ -79,6 +79,36 @@ impl Retrieval {
     }
 }
 
+/// How many motions a projected joint keeps (see [`ProjectOptions::dominant_motion`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum JointMotion {
+    /// NAP: every joint a screw with its rotation and translation ranges.
+    #[default]
+    Screw,
+    /// Only the wider range, compared in units of the range channels' feature scales
+    /// ([`range_units`]): each joint rotates, slides or is fixed.
+    Dominant,
+}
+
+impl JointMotion {
+    /// Wire / flag name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            JointMotion::Screw => "screw",
+            JointMotion::Dominant => "dominant",
+        }
+    }
+
+    /// Parse a wire / flag name (`screw`, `dominant`).
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "screw" => Some(JointMotion::Screw),
+            "dominant" => Some(JointMotion::Dominant),
+            _ => None,
+        }
+    }
+}
+
 /// The shape side of generation: the decoder that meshes latent parts, the SDF the guidance
 /// losses query, and the retrieval codebook.
 #[derive(Clone, Copy)]
@@ -118,9 +148,8 @@ pub struct GenerateRequest {
     pub retrieval: Retrieval,
     /// Classifier-free category guidance weight; see [`SampleRequest::category_guidance`].
     pub category_guidance: f64,
-    /// Keep one motion per joint (see [`ProjectOptions::dominant_motion`]), comparing the range
-    /// widths in units of the range channels' feature scales; false: NAP's screws.
-    pub dominant_motion: bool,
+    /// How many motions each joint keeps.
+    pub joint_motion: JointMotion,
 }
 
 /// One generated sample.
@@ -255,7 +284,8 @@ pub fn generate_with(
             &ProjectOptions {
                 name: format!("sample_{i:03}"),
                 category: req.category_name.clone(),
-                dominant_motion: req.dominant_motion.then(|| range_units(scales)),
+                dominant_motion: (req.joint_motion == JointMotion::Dominant)
+                    .then(|| range_units(scales)),
                 ..Default::default()
             },
         )
@@ -303,7 +333,7 @@ pub fn generate_with(
     Ok(out)
 }
 
-/// The units [rad, m] in which [`GenerateRequest::dominant_motion`] compares a joint's two range
+/// The units [rad, m] in which [`JointMotion::Dominant`] compares a joint's two range
 /// widths: the larger feature scale of each range's two channels (the model's own sense of a
 /// "typical" range; 1 where a scale is missing or degenerate).
 pub fn range_units(scales: &FeatureScales) -> [f64; 2] {
@@ -585,5 +615,9 @@ mod tests {
             assert_eq!(Retrieval::parse(r.as_str()), Some(r));
         }
         assert_eq!(Retrieval::parse("auto"), None);
+        for m in [JointMotion::Screw, JointMotion::Dominant] {
+            assert_eq!(JointMotion::parse(m.as_str()), Some(m));
+        }
+        assert_eq!(JointMotion::parse("revolute"), None);
     }
 }

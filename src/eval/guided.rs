@@ -26,7 +26,7 @@ use std::ops::ControlFlow;
 use burn::tensor::{Tensor, TensorData};
 
 use crate::engine::EngineError;
-use crate::engine::generate::{GenerateRequest, PartShapes, Retrieval, generate_with};
+use crate::engine::generate::{GenerateRequest, JointMotion, PartShapes, Retrieval, generate_with};
 use crate::engine::guidance::{GuidanceOptions, Terms};
 use crate::engine::sample::Sampler;
 use crate::engine::schedule::Schedule;
@@ -269,8 +269,8 @@ pub struct TableOptions {
     pub retrieval: Retrieval,
     /// Classifier-free category guidance of the category-aware rows.
     pub category_guidance: f64,
-    /// Keep one motion per joint; see [`GenerateRequest::dominant_motion`].
-    pub dominant_motion: bool,
+    /// How many motions each joint keeps; see [`GenerateRequest::joint_motion`].
+    pub joint_motion: JointMotion,
 }
 
 /// One row of Table 1: medians over all samples of all clouds.
@@ -621,7 +621,7 @@ pub fn run_rows(
                             None => opts.retrieval.without_category(),
                         },
                         category_guidance: opts.category_guidance,
-                        dominant_motion: opts.dominant_motion,
+                        joint_motion: opts.joint_motion,
                         ..Default::default()
                     };
                     let shapes = PartShapes {
@@ -905,7 +905,7 @@ mod tests {
             id: IdOptions::default(),
             retrieval: Retrieval::Off,
             category_guidance: 0.0,
-            dominant_motion: false,
+            joint_motion: JointMotion::Screw,
         };
         let mut calls = 0;
         let rows = guided_table(

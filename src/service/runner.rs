@@ -284,7 +284,7 @@ pub fn run_job(
         steps: spec.steps as usize,
         retrieval: spec.engine_retrieval(),
         category_guidance: spec.category_guidance,
-        dominant_motion: spec.dominant_motion(),
+        joint_motion: spec.engine_joint_motion(),
     };
     let decoder = LatentSdfDecoder::new(&m.shape_prior.decoder);
     let started = Instant::now();

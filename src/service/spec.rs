@@ -8,7 +8,7 @@
 //! `INVALID_ARGUMENT`).
 
 use crate::data::categories::category_index;
-use crate::engine::generate::Retrieval;
+use crate::engine::generate::{JointMotion, Retrieval};
 use crate::engine::guidance::{
     DEFAULT_GUIDED_STEPS, DEFAULT_MAX_STEP, DEFAULT_REFINE_STEPS, DEFAULT_TAU, GuidanceOptions,
     MAX_REFINE_STEPS, Terms,
@@ -78,12 +78,8 @@ pub struct JobInput {
     pub joint_motion: Option<String>,
 }
 
-/// Each joint keeps both ranges (NAP: every joint a screw).
-pub const JOINT_MOTION_SCREW: &str = "screw";
-/// Each joint keeps only its wider range (in units of the feature scales).
-pub const JOINT_MOTION_DOMINANT: &str = "dominant";
 /// The joint motion of a job that names none.
-pub const DEFAULT_JOINT_MOTION: &str = JOINT_MOTION_DOMINANT;
+pub const DEFAULT_JOINT_MOTION: JointMotion = JointMotion::Dominant;
 
 /// NAP's DDPM (strided ancestral sampling when fewer steps than the schedule are asked for).
 pub const SAMPLER_DDPM: &str = "ddpm";
@@ -199,9 +195,9 @@ impl JobSpec {
         self.w_pc > 0.0 || self.w_pen > 0.0 || self.w_mob > 0.0
     }
 
-    /// Whether the engine keeps one motion per joint.
-    pub fn dominant_motion(&self) -> bool {
-        self.joint_motion == JOINT_MOTION_DOMINANT
+    /// The engine's joint motion (an unknown name, impossible after [`validate`], is NAP's).
+    pub fn engine_joint_motion(&self) -> JointMotion {
+        JointMotion::parse(&self.joint_motion).unwrap_or_default()
     }
 
     /// The engine's retrieval mode (an unknown name, impossible after [`validate`], is `Off`).
@@ -567,12 +563,12 @@ pub fn validate(
         },
     };
     let joint_motion = match input.joint_motion.as_deref().filter(|m| !m.is_empty()) {
-        None => DEFAULT_JOINT_MOTION.to_string(),
-        Some(m) if m == JOINT_MOTION_SCREW || m == JOINT_MOTION_DOMINANT => m.to_string(),
+        None => DEFAULT_JOINT_MOTION.as_str().to_string(),
+        Some(m) if JointMotion::parse(m).is_some() => m.to_string(),
         Some(m) => {
             return Err(violation(
                 "joint_motion",
-                format!("\"{JOINT_MOTION_SCREW}\" or \"{JOINT_MOTION_DOMINANT}\""),
+                "\"screw\" or \"dominant\"",
                 format!("{m:?}"),
             ));
         }
@@ -757,11 +753,20 @@ mod tests {
         };
         let l = Limits::default();
         let run = |m| validate(&input(m), &caps(), &l, 0);
-        assert_eq!(run(None).unwrap().joint_motion, DEFAULT_JOINT_MOTION);
-        assert_eq!(run(Some("")).unwrap().joint_motion, DEFAULT_JOINT_MOTION);
+        assert_eq!(
+            run(None).unwrap().joint_motion,
+            DEFAULT_JOINT_MOTION.as_str()
+        );
+        assert_eq!(
+            run(Some("")).unwrap().joint_motion,
+            DEFAULT_JOINT_MOTION.as_str()
+        );
         let s = run(Some("dominant")).unwrap();
-        assert!(s.dominant_motion());
-        assert!(!run(Some("screw")).unwrap().dominant_motion());
+        assert_eq!(s.engine_joint_motion(), JointMotion::Dominant);
+        assert_eq!(
+            run(Some("screw")).unwrap().engine_joint_motion(),
+            JointMotion::Screw
+        );
         let v = run(Some("revolute")).unwrap_err();
         assert_eq!(
             (v.field.as_str(), v.limit.as_str(), v.value.as_str()),

@@ -186,7 +186,7 @@ struct SpecDoc {
 }
 
 fn joint_motion_screw() -> String {
-    super::spec::JOINT_MOTION_SCREW.into()
+    crate::engine::generate::JointMotion::Screw.as_str().into()
 }
 
 fn retrieval_off() -> String {

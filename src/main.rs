@@ -340,6 +340,10 @@ struct ShapeArgs {
     /// Truncate the L1 loss to the band [−δ, δ] (DeepSDF); default: plain L1, as NAP.
     #[arg(long, env = "PHYSNAP_SHAPE_TRUNCATION")]
     truncation: Option<f32>,
+    /// Weight EMA decay, e.g. 0.999 (default 0: off). With an EMA the val IoU, the saved
+    /// weights and the codebook use the averaged weights.
+    #[arg(long, env = "PHYSNAP_SHAPE_EMA_DECAY")]
+    ema_decay: Option<f64>,
     /// Val parts evaluated every --eval-every steps (default 32, at most 64).
     #[arg(long, env = "PHYSNAP_SHAPE_VAL_PARTS")]
     val_parts: Option<usize>,

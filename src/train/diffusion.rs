@@ -43,12 +43,13 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use burn::module::{Module, ModuleMapper, ModuleVisitor, Param};
+use burn::module::Module;
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::tensor::{Int, Tensor, TensorData};
 use serde_json::{Value, json};
 
 use super::TrainError;
+use super::ema::Ema;
 use crate::data::categories::CATEGORIES;
 use crate::data::rng::Rng;
 use crate::engine::schedule::Schedule;
@@ -235,59 +236,6 @@ pub fn grouped_loss(
     (node + edge).mean().clamp(-100.0, 100.0)
 }
 
-/// Host copies of a module's float parameters, in visiting order.
-struct Collect(Vec<Vec<f32>>);
-
-impl ModuleVisitor for Collect {
-    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-        let v = param.val().into_data().convert::<f32>();
-        self.0.push(v.try_to_vec::<f32>().unwrap_or_default());
-    }
-}
-
-/// `shadow[i] ← d · shadow[i] + (1 − d) · θᵢ` over a module's float parameters.
-struct Blend<'a> {
-    shadow: &'a mut [Vec<f32>],
-    decay: f32,
-    next: usize,
-}
-
-impl ModuleVisitor for Blend<'_> {
-    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-        let v = param.val().into_data().convert::<f32>();
-        let v = v.as_slice::<f32>().unwrap_or(&[]);
-        let s = &mut self.shadow[self.next];
-        let d = self.decay;
-        for (a, b) in s.iter_mut().zip(v) {
-            *a = d * *a + (1.0 - d) * b;
-        }
-        self.next += 1;
-    }
-}
-
-/// Replaces a module's float parameters by the shadow values.
-struct Install<'a> {
-    shadow: &'a [Vec<f32>],
-    next: usize,
-}
-
-impl ModuleMapper for Install<'_> {
-    fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
-        let values = self.shadow[self.next].clone();
-        self.next += 1;
-        param.map(|t| {
-            let (shape, device) = (t.shape(), t.device());
-            Tensor::from_data(TensorData::new(values, shape), &device)
-        })
-    }
-}
-
-fn collect<M: Module>(m: &M) -> Vec<Vec<f32>> {
-    let mut c = Collect(Vec::new());
-    m.visit(&mut c);
-    c.0
-}
-
 /// What the run did.
 #[derive(Debug, Clone)]
 pub struct DiffusionTrainReport {
@@ -380,8 +328,7 @@ pub fn train_diffusion(
     let raw_path = out.join("denoiser_raw.safetensors");
     let ckpt_path = out.join("checkpoint.json");
     let mut start = 0usize;
-    let mut ema_steps = 0usize;
-    let mut shadow: Option<Vec<Vec<f32>>> = None;
+    let mut shadow: Option<Ema> = None;
     // Wall time and loss EMA of the runs this one resumes (absent in older checkpoints).
     let mut prior_wall = 0.0f64;
     let mut ema = f64::NAN;
@@ -395,14 +342,14 @@ pub fn train_diffusion(
                 weights::load(&mut model, &raw_path, Some(raw_sha))?;
                 let mut ema_model = Denoiser::new(&cfg.model, &device)?;
                 weights::load(&mut ema_model, &weights_path, ck["sha256"].as_str())?;
-                shadow = Some(collect(&ema_model));
-                ema_steps = ck["ema_steps"].as_u64().unwrap_or(0) as usize;
+                let ema_steps = ck["ema_steps"].as_u64().unwrap_or(0) as usize;
+                shadow = Some(Ema::new(&ema_model, cfg.ema_decay, ema_steps));
             }
             _ => weights::load(&mut model, &weights_path, ck["sha256"].as_str())?,
         }
     }
     if cfg.ema_decay > 0.0 && shadow.is_none() {
-        shadow = Some(collect(&model));
+        shadow = Some(Ema::new(&model, cfg.ema_decay, 0));
     }
     if cfg.ema_decay == 0.0 {
         shadow = None;
@@ -485,14 +432,7 @@ pub fn train_diffusion(
         let grads = GradientsParams::from_grads(loss.backward(), &model);
         model = optim.step(cfg.lr_at(step), model, grads);
         if let Some(shadow) = shadow.as_mut() {
-            let n = ema_steps as f64;
-            let decay = cfg.ema_decay.min((1.0 + n) / (10.0 + n)) as f32;
-            model.visit(&mut Blend {
-                shadow,
-                decay,
-                next: 0,
-            });
-            ema_steps += 1;
+            shadow.update(&model);
         }
         ema = if ema.is_nan() {
             value
@@ -510,10 +450,10 @@ pub fn train_diffusion(
             let ck = match shadow.as_ref() {
                 Some(shadow) => {
                     let raw_sha = weights::save(&model.valid(), &raw_path)?;
-                    let averaged = model.valid().map(&mut Install { shadow, next: 0 });
+                    let averaged = shadow.install(model.valid());
                     sha = weights::save(&averaged, &weights_path)?;
                     json!({ "step": step + 1, "sha256": sha, "raw_sha256": raw_sha,
-                            "ema_steps": ema_steps, "loss_ema": ema,
+                            "ema_steps": shadow.steps, "loss_ema": ema,
                             "wall_seconds_total": prior_wall + t0.elapsed().as_secs_f64() })
                 }
                 None => {
@@ -539,7 +479,7 @@ pub fn train_diffusion(
         "wall_seconds_total": prior_wall + wall, "final_loss_ema": ema,
         "batch_objects": cfg.batch_objects, "noise_levels": cfg.noise_levels, "lr": cfg.lr,
         "lr_decay_start": cfg.lr_decay_start, "lr_final_factor": cfg.lr_final_factor,
-        "ema_decay": cfg.ema_decay, "ema_steps": ema_steps,
+        "ema_decay": cfg.ema_decay, "ema_steps": shadow.as_ref().map_or(0, |e| e.steps),
         "seed": cfg.seed, "category_dropout": cfg.category_dropout,
         "feature_scales": { "node": data.scales.node, "edge": data.scales.edge },
         "categories": CATEGORIES.to_vec(), "train_objects": data.graphs.len(), "sha256": sha,
@@ -719,34 +659,5 @@ mod tests {
             ..cfg
         };
         assert_eq!(constant.lr_at(100), 1e-3);
-    }
-
-    #[test]
-    fn ema_blends_and_installs_every_parameter() {
-        let device = crate::model::cpu();
-        let cfg = tiny_config(1).model;
-        let a = Denoiser::with_seed(&cfg, &device, 1).unwrap();
-        let b = Denoiser::with_seed(&cfg, &device, 2).unwrap();
-        let (va, vb) = (collect(&a), collect(&b));
-        assert_ne!(va, vb, "two initialisations should differ");
-        let mut shadow = va.clone();
-        b.visit(&mut Blend {
-            shadow: &mut shadow,
-            decay: 0.25,
-            next: 0,
-        });
-        let installed = collect(&a.map(&mut Install {
-            shadow: &shadow,
-            next: 0,
-        }));
-        assert_eq!(installed.len(), va.len());
-        for ((x, y), z) in va
-            .iter()
-            .flatten()
-            .zip(vb.iter().flatten())
-            .zip(installed.iter().flatten())
-        {
-            assert!((0.25 * x + 0.75 * y - z).abs() < 1e-6);
-        }
     }
 }

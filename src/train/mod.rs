@@ -9,6 +9,7 @@
 
 pub mod codebook;
 pub mod diffusion;
+pub mod ema;
 pub mod shape;
 
 use std::path::{Path, PathBuf};

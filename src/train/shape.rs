@@ -46,6 +46,7 @@ use rayon::prelude::*;
 use serde_json::{Value, json};
 
 use super::TrainError;
+use super::ema::Ema;
 use crate::data::rng::Rng;
 use crate::io::npy;
 use crate::mesh::DOMAIN_HALF;
@@ -71,10 +72,13 @@ pub const REPORT_FORMAT: &str = "physnap.shape_train/v1";
 pub const CHECKPOINT_FILE: &str = "shape_checkpoint.json";
 /// Format tag of `shape_checkpoint.json`.
 pub const CHECKPOINT_FORMAT: &str = "physnap.shape_checkpoint/v1";
+/// The EMA weights of a checkpoint (`ema_decay > 0`), beside the raw ones in
+/// `shape_prior.safetensors`.
+pub const EMA_CHECKPOINT_FILE: &str = "shape_prior_ema.checkpoint.safetensors";
 /// The config fields a resumed run must share with its checkpoint (they define the run's
 /// batches, schedule and model); the others (threads, evaluation, checkpointing, the decoder's
 /// backward implementation) may change between pieces.
-const RESUME_FIELDS: [&str; 12] = [
+const RESUME_FIELDS: [&str; 13] = [
     "model",
     "max_parts",
     "steps",
@@ -87,6 +91,7 @@ const RESUME_FIELDS: [&str; 12] = [
     "w_reg",
     "truncation",
     "seed",
+    "ema_decay",
 ];
 /// Largest number of validation parts evaluated.
 pub const MAX_VAL_PARTS: usize = 64;
@@ -120,6 +125,9 @@ pub struct ShapeTrainConfig {
     pub truncation: Option<f32>,
     /// Seed of weight init and batch sampling.
     pub seed: u64,
+    /// Weight EMA decay (0: off, the raw weights are the result). With an EMA the evaluations,
+    /// the saved weights and the codebook use the averaged weights (see `train::ema`).
+    pub ema_decay: f64,
     /// Evaluate every this many steps (0: only at the end).
     pub eval_every: usize,
     /// Validation parts evaluated (≤ [`MAX_VAL_PARTS`]).
@@ -177,6 +185,7 @@ impl Default for ShapeTrainConfig {
             w_reg: 1e-3,
             truncation: None,
             seed: 0,
+            ema_decay: 0.0,
             eval_every: 1000,
             val_parts: 32,
             iou_resolution: 64,
@@ -243,6 +252,13 @@ impl ShapeTrainConfig {
         if let Some(d) = self.truncation {
             positive("truncation", d as f64, 0.0, 10.0)?;
         }
+        if !(self.ema_decay.is_finite() && (0.0..1.0).contains(&self.ema_decay)) {
+            return Err(TrainError::config(
+                "ema_decay",
+                "in [0, 1) (0 turns the EMA off)",
+                self.ema_decay,
+            ));
+        }
         Ok(())
     }
 
@@ -277,6 +293,7 @@ impl ShapeTrainConfig {
             "w_reg": self.w_reg,
             "truncation": self.truncation,
             "seed": self.seed,
+            "ema_decay": self.ema_decay,
             "eval_every": self.eval_every,
             "val_parts": self.val_parts,
             "iou_resolution": self.iou_resolution,
@@ -811,6 +828,23 @@ pub fn save_shape_prior(model: &ShapePrior, path: &Path) -> Result<(), TrainErro
         .map_err(|e| TrainError::data(path, e.to_string()))
 }
 
+/// [`load_shape_prior`], refusing a file whose sha256 is not `sha` (a checkpoint's record).
+fn load_shape_prior_checked(
+    path: &Path,
+    cfg: &ShapePriorConfig,
+    sha: &str,
+    device: &Device,
+) -> Result<ShapePrior, TrainError> {
+    let bytes = std::fs::read(path).map_err(TrainError::io(path))?;
+    if crate::model::weights::sha256_hex(&bytes) != sha {
+        return Err(TrainError::data(
+            path,
+            "sha256 differs from the one the checkpoint recorded: the checkpoint is incomplete",
+        ));
+    }
+    load_shape_prior(path, cfg, device)
+}
+
 /// Load weights written by [`save_shape_prior`] into a model of size `cfg` on `device`.
 /// Every tensor must be present with the right shape, and no extra tensor may be in the file.
 pub fn load_shape_prior(
@@ -1221,16 +1255,20 @@ struct Trainer<'a> {
     rng: Rng,
     /// What is left of the current shuffled epoch (popped from the back).
     epoch: Vec<usize>,
+    /// The weight EMA (`ema_decay > 0`).
+    ema: Option<Ema>,
     device: Device,
 }
 
 impl<'a> Trainer<'a> {
     fn new(cfg: &'a ShapeTrainConfig, parts: &'a [PartSamples]) -> Self {
         let device = cpu_autodiff();
+        let model = ShapePrior::with_seed(&cfg.model, cfg.seed, &device);
         Trainer {
             cfg,
             parts,
-            model: Some(ShapePrior::with_seed(&cfg.model, cfg.seed, &device)),
+            ema: (cfg.ema_decay > 0.0).then(|| Ema::new(&model, cfg.ema_decay, 0)),
+            model: Some(model),
             optim: AdamConfig::new().with_epsilon(1e-8).init(),
             rng: Rng::fork(cfg.seed, 1),
             epoch: Vec::new(),
@@ -1259,16 +1297,29 @@ impl<'a> Trainer<'a> {
         }
         let grads = GradientsParams::from_grads(loss.backward(), &model);
         let lr = cfg.lr_at(step);
-        self.model = Some(self.optim.step(lr, model, grads));
+        let model = self.optim.step(lr, model, grads);
+        if let Some(ema) = self.ema.as_mut() {
+            ema.update(&model);
+        }
+        self.model = Some(model);
         Ok((value, lr))
     }
 
-    /// The current model in inference mode.
-    fn inference_model(&self) -> ShapePrior {
+    /// The raw (last-iterate) model in inference mode.
+    fn raw_model(&self) -> ShapePrior {
         self.model
             .as_ref()
             .expect("model is present between steps")
             .valid()
+    }
+
+    /// The model the run evaluates and saves: the EMA weights when there is an EMA, else the
+    /// raw ones.
+    fn inference_model(&self) -> ShapePrior {
+        match &self.ema {
+            Some(ema) => ema.install(self.raw_model()),
+            None => self.raw_model(),
+        }
     }
 }
 
@@ -1323,6 +1374,8 @@ struct Checkpoint {
     curve: Vec<EvalPoint>,
     train_s: f64,
     elapsed_s: f64,
+    /// EMA updates so far and the sha256 of [`EMA_CHECKPOINT_FILE`] (runs with an EMA).
+    ema: Option<(usize, String)>,
 }
 
 /// Weights (temp file + rename), then `shape_checkpoint.json` (atomic) with the weights'
@@ -1344,7 +1397,21 @@ fn write_checkpoint(
     )?;
     let bytes = std::fs::read(&tmp).map_err(TrainError::io(&tmp))?;
     std::fs::rename(&tmp, &weights).map_err(TrainError::io(&weights))?;
+    let ema = match &trainer.ema {
+        Some(ema) => {
+            let path = out.join(EMA_CHECKPOINT_FILE);
+            save_shape_prior(&trainer.inference_model(), &tmp)?;
+            let ema_bytes = std::fs::read(&tmp).map_err(TrainError::io(&tmp))?;
+            std::fs::rename(&tmp, &path).map_err(TrainError::io(&path))?;
+            json!({
+                "steps": ema.steps,
+                "sha256": crate::model::weights::sha256_hex(&ema_bytes),
+            })
+        }
+        None => Value::Null,
+    };
     let doc = json!({
+        "ema": ema,
         "format": CHECKPOINT_FORMAT,
         "step": c.step,
         "config": cfg.to_json(),
@@ -1398,12 +1465,16 @@ fn read_checkpoint(out: &Path, cfg: &ShapeTrainConfig) -> Result<Checkpoint, Tra
     }
     let ours = cfg.to_json();
     for field in RESUME_FIELDS {
-        if v["config"][field] != ours[field] {
+        // Checkpoints from before the EMA existed ran without one.
+        let theirs = match &v["config"][field] {
+            Value::Null if field == "ema_decay" => json!(0.0),
+            x => x.clone(),
+        };
+        if theirs != ours[field] {
             return Err(TrainError::Config {
                 field: field.to_string(),
                 limit: format!(
-                    "the checkpoint's value {} to resume {} (or start afresh without --resume)",
-                    v["config"][field],
+                    "the checkpoint's value {theirs} to resume {} (or start afresh without --resume)",
                     path.display()
                 ),
                 value: ours[field].to_string(),
@@ -1440,6 +1511,15 @@ fn read_checkpoint(out: &Path, cfg: &ShapeTrainConfig) -> Result<Checkpoint, Tra
             ),
         ));
     }
+    let ema = if cfg.ema_decay > 0.0 {
+        let steps = v["ema"]["steps"].as_u64().ok_or_else(|| bad("ema.steps"))? as usize;
+        let sha = v["ema"]["sha256"]
+            .as_str()
+            .ok_or_else(|| bad("ema.sha256"))?;
+        Some((steps, sha.to_string()))
+    } else {
+        None
+    };
     Ok(Checkpoint {
         step,
         rng_state,
@@ -1448,6 +1528,7 @@ fn read_checkpoint(out: &Path, cfg: &ShapeTrainConfig) -> Result<Checkpoint, Tra
         curve,
         train_s: num("train_s")?,
         elapsed_s: num("elapsed_s")?,
+        ema,
     })
 }
 
@@ -1497,6 +1578,11 @@ fn run(
             &cfg.model,
             &trainer.device,
         )?);
+        if let Some((steps, sha)) = &c.ema {
+            let path = out.join(EMA_CHECKPOINT_FILE);
+            let averaged = load_shape_prior_checked(&path, &cfg.model, sha, &trainer.device)?;
+            trainer.ema = Some(Ema::new(&averaged, cfg.ema_decay, *steps));
+        }
         trainer.rng = Rng::from_state(c.rng_state);
         trainer.epoch = c.epoch;
         (losses, curve, train_s, elapsed_before, start) =
@@ -1548,6 +1634,7 @@ fn run(
                     curve: curve.clone(),
                     train_s,
                     elapsed_s: elapsed_before + t_train.elapsed().as_secs_f64(),
+                    ema: None,
                 },
             )?;
         }
@@ -1600,8 +1687,10 @@ fn run(
             .as_bytes(),
     )?;
     // The run is complete: a leftover checkpoint would describe older weights.
-    if ckpt_path.is_file() {
-        std::fs::remove_file(&ckpt_path).map_err(TrainError::io(&ckpt_path))?;
+    for path in [ckpt_path, out.join(EMA_CHECKPOINT_FILE)] {
+        if path.is_file() {
+            std::fs::remove_file(&path).map_err(TrainError::io(&path))?;
+        }
     }
     Ok(report)
 }
@@ -1877,6 +1966,83 @@ mod tests {
         assert_eq!((sizes, doc["steps"].as_u64()), (cfg.model, Some(12)));
         let err = load_shape_dir(data.path(), &cpu()).unwrap_err().to_string();
         assert!(err.contains("not a `train shape` output"), "{err}");
+    }
+
+    /// With `ema_decay` the training losses are the raw run's (the EMA only reads the
+    /// weights), while the evaluations, the saved weights and the codebook come from the
+    /// averaged ones; a stopped EMA run checkpoints the shadow and resumes from it, and a
+    /// resume with another decay, or without the shadow's file, is refused by name.
+    #[test]
+    fn ema_run_saves_the_average_and_resumes_it() {
+        let data = tiny_dataset(39);
+        let train = data.path().join("train");
+        let cfg = ShapeTrainConfig {
+            steps: 8,
+            eval_every: 4,
+            checkpoint_every: 0,
+            ..tiny_config()
+        };
+        let ema_cfg = ShapeTrainConfig {
+            ema_decay: 0.9,
+            ..cfg.clone()
+        };
+        let mut raw_losses = Vec::new();
+        let raw = train_shape(&train, &cfg, &data.path().join("raw"), &mut |p| {
+            raw_losses.push(p.loss)
+        })
+        .unwrap();
+        let mut ema_losses = Vec::new();
+        let averaged = train_shape(&train, &ema_cfg, &data.path().join("ema"), &mut |p| {
+            ema_losses.push(p.loss)
+        })
+        .unwrap();
+        assert_eq!(raw_losses, ema_losses, "the EMA must not change training");
+        assert_ne!(
+            raw.curve[1].l1, averaged.curve[1].l1,
+            "evaluated the raw weights"
+        );
+        let weights = |dir: &str| std::fs::read(data.path().join(dir).join(WEIGHTS_FILE)).unwrap();
+        assert_ne!(weights("raw"), weights("ema"), "saved the raw weights");
+        let report: Value = serde_json::from_str(
+            &std::fs::read_to_string(data.path().join("ema").join(REPORT_FILE)).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(report["config"]["ema_decay"], 0.9);
+
+        let out = data.path().join("split");
+        let first = ShapeTrainConfig {
+            stop_at: Some(4),
+            ..ema_cfg.clone()
+        };
+        train_shape(&train, &first, &out, &mut |_| {}).unwrap();
+        assert!(out.join(EMA_CHECKPOINT_FILE).is_file());
+        let other = ShapeTrainConfig {
+            ema_decay: 0.99,
+            resume: true,
+            ..ema_cfg.clone()
+        };
+        let err = train_shape(&train, &other, &out, &mut |_| {})
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("ema_decay") && err.contains("0.9"), "{err}");
+        let resumed = ShapeTrainConfig {
+            resume: true,
+            ..ema_cfg.clone()
+        };
+        let kept = data.path().join("kept.safetensors");
+        std::fs::rename(out.join(EMA_CHECKPOINT_FILE), &kept).unwrap();
+        let err = train_shape(&train, &resumed, &out, &mut |_| {})
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains(EMA_CHECKPOINT_FILE), "{err}");
+        std::fs::rename(&kept, out.join(EMA_CHECKPOINT_FILE)).unwrap();
+        let mut losses = Vec::new();
+        let r2 = train_shape(&train, &resumed, &out, &mut |p| losses.push(p.loss)).unwrap();
+        assert_eq!(r2.steps, 8);
+        assert_eq!(losses[0], ema_losses[4], "resumed from the raw weights");
+        // The step-4 evaluation is the averaged weights' and survives the resume.
+        assert_eq!(r2.curve[0].l1.to_bits(), averaged.curve[0].l1.to_bits());
+        assert!(!out.join(EMA_CHECKPOINT_FILE).exists() && !out.join(CHECKPOINT_FILE).exists());
     }
 
     #[test]

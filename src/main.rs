@@ -322,6 +322,10 @@ struct ShapeArgs {
     /// Positional-encoding octaves of the query (default 8, as NAP).
     #[arg(long, env = "PHYSNAP_SHAPE_PE_FREQS")]
     pe_freqs: Option<usize>,
+    /// Add the code to every residual block's input of the SDF decoder (ConvONet's decoder),
+    /// not only to the first layer as NAP does.
+    #[arg(long, env = "PHYSNAP_SHAPE_CODE_EVERY_BLOCK")]
+    code_every_block: bool,
     /// SDF queries per part and step, half uniform and half near-surface (default 2048).
     #[arg(long, env = "PHYSNAP_SHAPE_QUERIES_PER_PART")]
     queries_per_part: Option<usize>,

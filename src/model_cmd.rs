@@ -43,6 +43,7 @@ pub fn shape(a: ShapeArgs) -> anyhow::Result<()> {
             encoder_hidden: a.encoder_hidden.unwrap_or(m.encoder_hidden),
             encoder_blocks: a.encoder_blocks.unwrap_or(m.encoder_blocks),
             pe_freqs: a.pe_freqs.unwrap_or(m.pe_freqs),
+            code_every_block: a.code_every_block,
             ..m
         },
         queries_per_part: a.queries_per_part.unwrap_or(defaults.queries_per_part),

@@ -671,6 +671,7 @@ mod tests {
             encoder_hidden: 8,
             encoder_blocks: 1,
             pe_freqs: 2,
+            code_every_block: false,
         };
         crate::model::shape_prior::ShapeDecoder::new(&cfg, &mut Rng::new(4), &crate::model::cpu())
     }

@@ -40,6 +40,9 @@ struct ShapeConfigDoc {
     encoder_hidden: usize,
     encoder_blocks: usize,
     pe_freqs: usize,
+    /// Absent in manifests written before the option existed (false).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    code_every_block: bool,
 }
 
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
@@ -149,6 +152,7 @@ fn shape_to_doc(c: &ShapePriorConfig) -> ShapeConfigDoc {
         encoder_hidden: c.encoder_hidden,
         encoder_blocks: c.encoder_blocks,
         pe_freqs: c.pe_freqs,
+        code_every_block: c.code_every_block,
     }
 }
 
@@ -228,6 +232,7 @@ pub fn from_str(text: &str, path: &str) -> Result<Manifest, FormatError> {
                 encoder_hidden: s.encoder_hidden,
                 encoder_blocks: s.encoder_blocks,
                 pe_freqs: s.pe_freqs,
+                code_every_block: s.code_every_block,
             },
         },
         denoiser: Entry {
@@ -381,5 +386,22 @@ mod tests {
         let shipped = include_str!("../../weights/manifest.json");
         let m = from_str(shipped, "weights/manifest.json").unwrap();
         assert!(m.denoiser.config.category_layers);
+    }
+
+    /// The shipped manifest (NAP's decoder) reads `code_every_block` as off and writes back
+    /// without it; a manifest with it on round-trips.
+    #[test]
+    fn code_every_block_round_trips_and_defaults_to_off() {
+        let shipped = include_str!("../../weights/manifest.json");
+        let m = from_str(shipped, "weights/manifest.json").unwrap();
+        assert!(!shipped.contains("code_every_block"));
+        assert!(!m.shape_prior.config.code_every_block);
+        assert!(!to_string(&m).contains("code_every_block"));
+        let mut on = m.clone();
+        on.shape_prior.config.code_every_block = true;
+        let text = to_string(&on);
+        assert!(text.contains("\"code_every_block\": true"), "{text}");
+        let back = from_str(&text, "m.json").unwrap();
+        assert_eq!(back.shape_prior.config, on.shape_prior.config);
     }
 }

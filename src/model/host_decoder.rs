@@ -231,8 +231,8 @@ pub struct InputGrads {
     pub values: Vec<f32>,
     /// ∂f/∂q per row, [Q].
     pub d_points: Vec<[f32; 3]>,
-    /// ∂f/∂h₀ per row, [Q × hidden] flat: the gradient with respect to the row's code features
-    /// (z W_c + b_c).
+    /// ∂f/∂(code features) per row, [Q × feature_width] flat: the gradient with respect to the
+    /// row's code features (z W_c + b_c; ∂f/∂h₀ for row 0, ∂f/∂h_l for block l's row).
     pub d_features: Vec<f32>,
 }
 
@@ -299,6 +299,8 @@ pub struct HostDecoder {
     pe_freqs: usize,
     /// Widest activation (hidden, or a block's width).
     width: usize,
+    /// Code-feature rows of `hidden` (1, or one per block with `code_every_block`).
+    code_rows: usize,
 }
 
 impl HostDecoder {
@@ -318,9 +320,12 @@ impl HostDecoder {
             .iter()
             .flat_map(|b| [b.fc_0.d_in, b.fc_0.d_out, b.fc_1.d_out])
             .fold(fc_p.d_out, usize::max);
+        let fc_c = HostLinear::new(&decoder.fc_c);
+        let code_rows = fc_c.d_out / fc_p.d_out;
         HostDecoder {
+            code_rows,
             fc_p,
-            fc_c: HostLinear::new(&decoder.fc_c),
+            fc_c,
             blocks,
             fc_out: HostLinear::new(&decoder.fc_out),
             pe_freqs: decoder.pe_freqs,
@@ -338,19 +343,25 @@ impl HostDecoder {
         self.fc_p.d_out
     }
 
-    /// z W_c + b_c for `codes` [P, F] (flat) → [P, hidden] (flat).
+    /// Width of one part's code features: hidden · rows (rows = 1, or one per block with
+    /// `code_every_block`).
+    pub fn feature_width(&self) -> usize {
+        self.fc_c.d_out
+    }
+
+    /// z W_c + b_c for `codes` [P, F] (flat) → [P, feature_width] (flat).
     pub fn code_features(&self, codes: &[f32]) -> Vec<f32> {
         let p = codes.len() / self.latent();
-        let mut out = vec![0.0; p * self.hidden()];
+        let mut out = vec![0.0; p * self.feature_width()];
         self.fc_c.apply(codes, &mut out, p, false);
         out
     }
 
     fn check_inputs(&self, q: &[[f32; 3]], features: &[f32], idx: &[usize]) {
         assert_eq!(q.len(), idx.len(), "one part index per point");
-        let hidden = self.hidden();
+        let fw = self.feature_width();
         assert!(
-            idx.iter().all(|&i| (i + 1) * hidden <= features.len()),
+            idx.iter().all(|&i| (i + 1) * fw <= features.len()),
             "part index past the code features"
         );
     }
@@ -380,16 +391,16 @@ impl HostDecoder {
     /// When `idx` and `q` differ in length or an index is past the features.
     pub fn eval_with_grads(&self, q: &[[f32; 3]], features: &[f32], idx: &[usize]) -> InputGrads {
         self.check_inputs(q, features, idx);
-        let hidden = self.hidden();
+        let fw = self.feature_width();
         let mut g = InputGrads {
             values: vec![0.0; q.len()],
             d_points: vec![[0.0; 3]; q.len()],
-            d_features: vec![0.0; q.len() * hidden],
+            d_features: vec![0.0; q.len() * fw],
         };
         g.values
             .par_chunks_mut(BLOCK_ROWS)
             .zip(g.d_points.par_chunks_mut(BLOCK_ROWS))
-            .zip(g.d_features.par_chunks_mut(BLOCK_ROWS * hidden))
+            .zip(g.d_features.par_chunks_mut(BLOCK_ROWS * fw))
             .zip(q.par_chunks(BLOCK_ROWS))
             .zip(idx.par_chunks(BLOCK_ROWS))
             .for_each_init(
@@ -432,11 +443,11 @@ impl HostDecoder {
         upstream: &(dyn Fn(usize, f32) -> f32 + Sync),
     ) -> WeightGrads {
         self.check_inputs(q, features, idx);
-        let hidden = self.hidden();
+        let fw = self.feature_width();
         let group_rows = GROUP_BLOCKS * BLOCK_ROWS;
         let zeros = || WeightGrads {
             values: Vec::new(),
-            d_features: vec![0.0; features.len() / hidden * hidden],
+            d_features: vec![0.0; features.len() / fw * fw],
             layers: self.layers().into_iter().map(LinearGrad::zeros).collect(),
         };
         let groups: Vec<WeightGrads> = q
@@ -539,6 +550,10 @@ impl HostDecoder {
                 None => add_into(&mut s.g_next[..rows * w_in], &s.g[..rows * w_in]),
             }
             std::mem::swap(&mut s.g, &mut s.g_next);
+            // Block l's input carries code row l (l ≥ 1): ∂features_i[row l] += Σ_{idx=i} g_l.
+            if l > 0 && l < self.code_rows {
+                self.add_feature_grads(idx, l, &s.g, &mut acc.d_features);
+            }
         }
         debug_assert_eq!(layer, 1, "every layer but fc_p visited");
         // h₀ = features[idx] + γ W_p + b_p: ∂W_p = γᵀ g₀, ∂b_p = Σ_r g₀, ∂features[i] = Σ_{idx=i} g₀.
@@ -549,11 +564,27 @@ impl HostDecoder {
         if let Some(db) = &mut fc_p.b {
             col_sums_acc(db, &s.g, rows);
         }
+        self.add_feature_grads(idx, 0, &s.g, &mut acc.d_features);
+    }
+
+    /// `d_features[idx_r][row] += g_r` for every row r of the block (g: [rows, hidden]).
+    fn add_feature_grads(&self, idx: &[usize], row: usize, g: &[f32], d_features: &mut [f32]) {
+        let (hidden, fw) = (self.hidden(), self.feature_width());
         for (r, &i) in idx.iter().enumerate() {
+            let at = i * fw + row * hidden;
             add_into(
-                &mut acc.d_features[i * hidden..(i + 1) * hidden],
-                &s.g[r * hidden..(r + 1) * hidden],
+                &mut d_features[at..at + hidden],
+                &g[r * hidden..(r + 1) * hidden],
             );
+        }
+    }
+
+    /// `d_features[r][row] = g_r` for the block's rows (per-row input gradients).
+    fn copy_feature_grads(&self, rows: usize, row: usize, g: &[f32], d_features: &mut [f32]) {
+        let (hidden, fw) = (self.hidden(), self.feature_width());
+        for r in 0..rows {
+            let at = r * fw + row * hidden;
+            d_features[at..at + hidden].copy_from_slice(&g[r * hidden..(r + 1) * hidden]);
         }
     }
 
@@ -609,16 +640,26 @@ impl HostDecoder {
                 }
             }
         }
-        // h₀ = features[idx] + γ W_p + b_p.
-        let hidden = self.hidden();
+        // h₀ = features[idx] (row 0) + γ W_p + b_p.
+        let (hidden, fw) = (self.hidden(), self.feature_width());
         for (r, &i) in idx.iter().enumerate() {
             s.hs[0][r * hidden..(r + 1) * hidden]
-                .copy_from_slice(&features[i * hidden..(i + 1) * hidden]);
+                .copy_from_slice(&features[i * fw..i * fw + hidden]);
         }
         self.fc_p.apply(&s.pe, &mut s.hs[0], rows, true);
         let mut width = hidden;
         for (l, b) in self.blocks.iter().enumerate() {
             let (i, k) = (s.slot(l), s.t_slot(l));
+            // Code row l joins block l's input (l ≥ 1, `code_every_block`).
+            if l > 0 && l < self.code_rows {
+                for (r, &p) in idx.iter().enumerate() {
+                    let at = p * fw + l * hidden;
+                    add_into(
+                        &mut s.hs[i][r * hidden..(r + 1) * hidden],
+                        &features[at..at + hidden],
+                    );
+                }
+            }
             // a = ReLU(h_l); t_l = ReLU(a W₀ + b₀).
             let n_in = rows * width;
             s.a[..n_in]
@@ -662,8 +703,8 @@ impl HostDecoder {
     }
 
     /// The backward pass of the block just run by [`HostDecoder::forward_block`] (module docs),
-    /// seeded with ∂f/∂f = 1 per row: writes ∂f/∂q into `d_points` and ∂f/∂h₀ into
-    /// `d_features` [rows × hidden].
+    /// seeded with ∂f/∂f = 1 per row: writes ∂f/∂q into `d_points` and ∂f/∂(code features)
+    /// into `d_features` [rows × feature_width] (row 0: ∂f/∂h₀; row l: ∂f/∂h_l).
     fn backward_block(
         &self,
         q: &[[f32; 3]],
@@ -701,9 +742,12 @@ impl HostDecoder {
                     .for_each(|(n, g)| *n += g),
             }
             std::mem::swap(&mut s.g, &mut s.g_next);
+            if l > 0 && l < self.code_rows {
+                self.copy_feature_grads(rows, l, &s.g, d_features);
+            }
         }
         let hidden = self.hidden();
-        d_features[..rows * hidden].copy_from_slice(&s.g[..rows * hidden]);
+        self.copy_feature_grads(rows, 0, &s.g, d_features);
         // ∂f/∂γ = g₀ W_pᵀ, then through γ to q.
         let (nf, pe_dim) = (self.pe_freqs, self.fc_p.d_in);
         s.g_pe[..rows * pe_dim].fill(0.0);
@@ -746,6 +790,16 @@ mod tests {
                 encoder_hidden: 8,
                 encoder_blocks: 1,
                 pe_freqs: 4,
+                code_every_block: false,
+            },
+            ShapePriorConfig {
+                latent: 16,
+                decoder_hidden: 24,
+                decoder_blocks: 3,
+                encoder_hidden: 8,
+                encoder_blocks: 1,
+                pe_freqs: 4,
+                code_every_block: true,
             },
             ShapePriorConfig {
                 pe_freqs: 0,
@@ -753,6 +807,10 @@ mod tests {
                 ..ShapePriorConfig::default()
             },
             ShapePriorConfig::default(),
+            ShapePriorConfig {
+                code_every_block: true,
+                ..ShapePriorConfig::default()
+            },
         ] {
             let device = cpu();
             let mut rng = Rng::new(7);

@@ -8,6 +8,11 @@
 //! takes every part and point of a step in one call ([P, N, 3] points, [P, F] codes) and is
 //! differentiable in both inputs.
 //!
+//! One option departs from NAP: `code_every_block` adds a code feature W_c,l z + b_c,l to the
+//! input of every residual block l (ConvONet's decoder), where NAP adds z W_c + b_c to the first
+//! layer only; W_c then has `decoder_blocks` stacked outputs of `decoder_hidden`, row 0 being
+//! NAP's. Off by default, and absent from manifests of NAP's decoder.
+//!
 //! Widths are configurable: [`ShapePriorConfig::nap`] is the paper's network (decoder 704,513
 //! parameters, encoder 6,628,480), [`ShapePriorConfig::default`] a smaller one that trains on a
 //! 2-core CPU in about an hour. Weights are initialised from our own seeded [`Rng`]
@@ -42,6 +47,10 @@ pub struct ShapePriorConfig {
     pub encoder_blocks: usize,
     /// Positional-encoding octaves N_pe (NAP: 8), γ(q) has 3 + 6·N_pe channels.
     pub pe_freqs: usize,
+    /// Add a code feature W_c,l z to the input of every residual block l (ConvONet's decoder),
+    /// not only to the first layer (NAP). W_c then maps z to `decoder_blocks` stacked feature
+    /// rows of `decoder_hidden` each, the first being NAP's.
+    pub code_every_block: bool,
 }
 
 impl Default for ShapePriorConfig {
@@ -54,6 +63,7 @@ impl Default for ShapePriorConfig {
             encoder_hidden: 128,
             encoder_blocks: 4,
             pe_freqs: 8,
+            code_every_block: false,
         }
     }
 }
@@ -75,12 +85,23 @@ impl ShapePriorConfig {
             encoder_hidden: 512,
             encoder_blocks: 5,
             pe_freqs: 8,
+            code_every_block: false,
         }
     }
 
     /// Width of γ(q): 3 + 6·N_pe (51 for N_pe = 8).
     pub fn pe_dim(&self) -> usize {
         3 + 6 * self.pe_freqs
+    }
+
+    /// Code-feature rows of `decoder_hidden` the decoder adds: one per residual block with
+    /// `code_every_block` (at least one), else one (the input's).
+    pub fn code_rows(&self) -> usize {
+        if self.code_every_block {
+            self.decoder_blocks.max(1)
+        } else {
+            1
+        }
     }
 
     /// Check every size against its range.
@@ -198,7 +219,7 @@ impl ShapeDecoder {
         let h = cfg.decoder_hidden;
         ShapeDecoder {
             fc_p: linear(cfg.pe_dim(), h, true, false, rng, device),
-            fc_c: linear(cfg.latent, h, true, false, rng, device),
+            fc_c: linear(cfg.latent, h * cfg.code_rows(), true, false, rng, device),
             blocks: (0..cfg.decoder_blocks)
                 .map(|_| ResBlock::new(h, h, rng, device))
                 .collect(),
@@ -207,21 +228,33 @@ impl ShapeDecoder {
         }
     }
 
-    /// W_c z + b_c per part: [P, F] → [P, hidden]. Compute once per code and reuse with
+    /// W_c z + b_c per part: [P, F] → [P, hidden · rows] (rows = 1, or one per block with
+    /// `code_every_block`). Compute once per code and reuse with
     /// [`ShapeDecoder::sdf_with_features`].
     pub fn code_features(&self, codes: Tensor<2>) -> Tensor<2> {
         self.fc_c.forward(codes)
     }
 
     /// SDF of `points` [P, N, 3] (normalised part frame) for parts whose code features
-    /// (from [`ShapeDecoder::code_features`]) are `features` [P, hidden] → [P, N].
+    /// (from [`ShapeDecoder::code_features`]) are `features` [P, hidden · rows] → [P, N].
+    /// Row 0 is added to the first layer's output, row l to block l's input (l ≥ 1).
     pub fn sdf_with_features(&self, points: Tensor<3>, features: Tensor<2>) -> Tensor<2> {
         let [p, n, _] = points.dims();
-        let hidden = features.dims()[1];
+        let hidden = self.hidden();
+        let rows = features.dims()[1] / hidden;
+        let row = |l: usize| {
+            features
+                .clone()
+                .narrow(1, l * hidden, hidden)
+                .unsqueeze_dim::<3>(1)
+        };
         let pe = positional_encoding(points.reshape([p * n, 3]), self.pe_freqs);
-        let h = self.fc_p.forward(pe).reshape([p, n, hidden]) + features.unsqueeze_dim::<3>(1);
+        let h = self.fc_p.forward(pe).reshape([p, n, hidden]) + row(0);
         let mut h = h.reshape([p * n, hidden]);
-        for block in &self.blocks {
+        for (l, block) in self.blocks.iter().enumerate() {
+            if l > 0 && l < rows {
+                h = (h.reshape([p, n, hidden]) + row(l)).reshape([p * n, hidden]);
+            }
             h = block.forward(h);
         }
         self.fc_out.forward(leaky_relu(h, 0.2)).reshape([p, n])
@@ -242,6 +275,11 @@ impl ShapeDecoder {
     /// Latent width F.
     pub fn latent(&self) -> usize {
         self.fc_c.weight.shape().dims::<2>()[0]
+    }
+
+    /// Width of the code features (hidden · rows).
+    pub fn feature_width(&self) -> usize {
+        self.fc_c.weight.shape().dims::<2>()[1]
     }
 }
 
@@ -410,6 +448,7 @@ pub(crate) mod tests {
             encoder_hidden: 16,
             encoder_blocks: 2,
             pe_freqs: 8,
+            code_every_block: false,
         }
     }
 

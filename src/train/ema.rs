@@ -129,6 +129,7 @@ mod tests {
             encoder_hidden: 8,
             encoder_blocks: 1,
             pe_freqs: 1,
+            code_every_block: false,
         }
     }
 

@@ -306,14 +306,19 @@ impl ShapeTrainConfig {
 }
 
 fn model_config_json(m: &ShapePriorConfig) -> Value {
-    json!({
+    let mut doc = json!({
         "latent": m.latent,
         "decoder_hidden": m.decoder_hidden,
         "decoder_blocks": m.decoder_blocks,
         "encoder_hidden": m.encoder_hidden,
         "encoder_blocks": m.encoder_blocks,
         "pe_freqs": m.pe_freqs,
-    })
+    });
+    // Written only when on, so reports and checkpoints of NAP's decoder read as before.
+    if m.code_every_block {
+        doc["code_every_block"] = json!(true);
+    }
+    doc
 }
 
 /// The model sizes recorded in a `shape_train.json` (to load its weights).
@@ -339,6 +344,10 @@ fn model_config_of(v: &Value, report: &Path) -> Result<ShapePriorConfig, TrainEr
         encoder_hidden: get("encoder_hidden")?,
         encoder_blocks: get("encoder_blocks")?,
         pe_freqs: get("pe_freqs")?,
+        // Absent in reports written before the option existed.
+        code_every_block: v["config"]["model"]["code_every_block"]
+            .as_bool()
+            .unwrap_or(false),
     };
     cfg.validate()?;
     Ok(cfg)
@@ -1176,7 +1185,7 @@ fn host_decoder_surrogate(
     let device = z.device();
     let features = decoder.code_features(z);
     let host = HostDecoder::new(decoder);
-    let hidden = host.hidden();
+    let hidden = host.feature_width();
     let feature_values = to_vec(features.clone().detach());
     let q: Vec<[f32; 3]> = pts.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
     let idx: Vec<usize> = (0..q.len()).map(|r| r / queries_per_part).collect();
@@ -1745,6 +1754,7 @@ mod tests {
                 encoder_hidden: 32,
                 encoder_blocks: 2,
                 pe_freqs: 4,
+                code_every_block: false,
             },
             steps: 100,
             batch_parts: 8,
@@ -1968,6 +1978,36 @@ mod tests {
         assert!(err.contains("not a `train shape` output"), "{err}");
     }
 
+    /// A decoder with the code at every block trains (the loss falls), and its run directory
+    /// loads back with the option on: the report carries it to every loader.
+    #[test]
+    fn code_every_block_trains_and_loads_back() {
+        let data = tiny_dataset(12);
+        let train = data.path().join("train");
+        let out = data.path().join("every");
+        let mut cfg = ShapeTrainConfig {
+            steps: 40,
+            eval_every: 0,
+            checkpoint_every: 0,
+            val_parts: 0,
+            ..tiny_config()
+        };
+        cfg.model.code_every_block = true;
+        let report = train_shape(&train, &cfg, &out, &mut |_| {}).unwrap();
+        assert!(
+            report.final_loss < report.initial_loss,
+            "{} → {}",
+            report.initial_loss,
+            report.final_loss
+        );
+        let (model, sizes, _) = load_shape_dir(&out, &cpu()).unwrap();
+        assert_eq!(sizes, cfg.model);
+        assert_eq!(
+            model.decoder.feature_width(),
+            cfg.model.decoder_hidden * cfg.model.decoder_blocks
+        );
+    }
+
     /// With `ema_decay` the training losses are the raw run's (the EMA only reads the
     /// weights), while the evaluations, the saved weights and the codebook come from the
     /// averaged ones; a stopped EMA run checkpoints the shadow and resumes from it, and a
@@ -2165,9 +2205,12 @@ mod tests {
                 })
             }
         }
-        for (seed, pe_freqs, blocks, truncation) in
-            [(1, 4, 2, None), (2, 0, 1, Some(0.05)), (3, 6, 0, None)]
-        {
+        for (seed, pe_freqs, blocks, truncation, code_every_block) in [
+            (1, 4, 2, None, false),
+            (2, 0, 1, Some(0.05), false),
+            (3, 6, 0, None, false),
+            (4, 4, 3, None, true),
+        ] {
             let cfg = ShapeTrainConfig {
                 model: ShapePriorConfig {
                     latent: 12,
@@ -2176,6 +2219,7 @@ mod tests {
                     encoder_hidden: 8,
                     encoder_blocks: 2,
                     pe_freqs,
+                    code_every_block,
                 },
                 queries_per_part: 350, // 3 × 350 rows: several 128-row blocks and a partial one
                 surface_points: 40,

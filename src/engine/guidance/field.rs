@@ -100,7 +100,7 @@ impl SdfField for LatentSdfDecoder {
             return SdfField::sdf(self.decoder(), q, codes, idx);
         };
         let host = self.host();
-        let hidden = host.hidden();
+        let hidden = host.feature_width();
         let rows: Vec<usize> = host_idx.iter().map(|&i| i as usize).collect();
         let g = host.eval_with_grads(&points, &host.code_features(&host_codes), &rows);
         let (n, device) = (points.len(), q.device());

@@ -37,6 +37,7 @@ fn mixed() -> MixedField {
         encoder_hidden: 8,
         encoder_blocks: 1,
         pe_freqs: 2,
+        code_every_block: false,
     };
     let mut rng = Rng::new(11);
     MixedField {
@@ -603,6 +604,7 @@ fn value_only_part_sdf_equals_the_differentiable_one() {
         encoder_hidden: 8,
         encoder_blocks: 1,
         pe_freqs: 4,
+        code_every_block: false,
     };
     let mut rng = Rng::new(21);
     let learned = LatentSdfDecoder::new(&crate::model::shape_prior::tests::randomised(
@@ -666,7 +668,12 @@ fn value_only_part_sdf_equals_the_differentiable_one() {
 fn host_decoder_gradients_equal_burn_autodiff() {
     use crate::model::shape_prior::LatentSdfDecoder;
     use crate::model::shape_prior::tests::randomised;
-    for (seed, pe_freqs, blocks) in [(31, 4, 2), (32, 0, 1), (33, 8, 0)] {
+    for (seed, pe_freqs, blocks, code_every_block) in [
+        (31, 4, 2, false),
+        (32, 0, 1, false),
+        (33, 8, 0, false),
+        (34, 4, 3, true),
+    ] {
         let cfg = ShapePriorConfig {
             latent: LATENT,
             decoder_hidden: 32,
@@ -674,6 +681,7 @@ fn host_decoder_gradients_equal_burn_autodiff() {
             encoder_hidden: 8,
             encoder_blocks: 1,
             pe_freqs,
+            code_every_block,
         };
         let mut rng = Rng::new(seed);
         let learned =

@@ -28,6 +28,7 @@ pub fn tiny_weights(dir: &Path) {
         encoder_hidden: 16,
         encoder_blocks: 1,
         pe_freqs: 2,
+        code_every_block: false,
     };
     let sp = ShapePrior::new(&sp_cfg, &device);
     let sp_sha = weights::save(&sp, &dir.join("shape_prior.safetensors")).unwrap();

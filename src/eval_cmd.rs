@@ -875,6 +875,13 @@ pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
             a.weights.display()
         );
     }
+    if a.write_manifest && a.fit_codes > 0 {
+        bail!(
+            "--write-manifest records the encoder's IoU, the target's; --fit-codes {} measures \
+             the decoder with fitted codes instead (keep it with --out)",
+            a.fit_codes
+        );
+    }
     let (shape_prior, model_cfg, report) = load_any_shape_prior(&a.weights)?;
     let defaults = ShapeTrainConfig::default();
     let surface_points = report["config"]["surface_points"]
@@ -893,6 +900,7 @@ pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
         &cfg,
         &a.split,
         a.parts,
+        a.fit_codes,
         &mut |done, total| {
             pb.set_length(total as u64);
             pb.set_position(done as u64);
@@ -932,6 +940,12 @@ pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
         }
     }
     println!("  mean SDF L1 {l1:.5} (normalised units)");
+    if a.fit_codes > 0 {
+        println!(
+            "  codes fitted to each part's samples ({} Adam steps, decoder frozen), not encoded",
+            a.fit_codes
+        );
+    }
     let summary = json!({
         "format": "physnap.eval_shape/v1",
         "split": a.split,
@@ -939,6 +953,7 @@ pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
         "resolution": a.resolution,
         "mean_iou": mean(&all),
         "l1": l1,
+        "fit_codes": a.fit_codes,
         "groups": groups.iter().map(|(name, sel)| json!({
             "name": name, "parts": sel.len(), "mean_iou": mean(sel),
         })).collect::<Vec<_>>(),

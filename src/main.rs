@@ -158,6 +158,11 @@ struct EvalShapeArgs {
     /// manifest.json.
     #[arg(long, env = "PHYSNAP_EVAL_WRITE_MANIFEST")]
     write_manifest: bool,
+    /// Fit each part's code to its SDF samples for this many Adam steps, decoder frozen
+    /// (DeepSDF's auto-decoder inference), before measuring: the decoder's IoU apart from the
+    /// encoder's. 0 (default): the encoder's codes, as the codebook and the target use.
+    #[arg(long, env = "PHYSNAP_EVAL_FIT_CODES", default_value_t = 0)]
+    fit_codes: usize,
 }
 
 #[derive(Args, Debug)]

@@ -412,6 +412,46 @@ fn synth_import_train_generate() {
             .unwrap();
     assert_eq!(m["metrics"]["shape"]["mean_iou"], r["mean_iou"], "{m:#}");
     assert_eq!(m["metrics"]["shape"]["parts"], parts.len());
+    // With fitted codes (decoder alone) the report says so, and the manifest is refused.
+    let fitted = root.path().join("shape_fit.json");
+    let out = ok(&[
+        "eval",
+        "shape",
+        "--weights",
+        s(&weights),
+        "--data",
+        s(&data),
+        "--parts",
+        "3",
+        "--resolution",
+        "16",
+        "--fit-codes",
+        "5",
+        "--out",
+        s(&fitted),
+    ]);
+    assert!(out.contains("codes fitted"), "{out}");
+    let f: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&fitted).unwrap()).unwrap();
+    assert_eq!(f["fit_codes"], 5);
+    assert_eq!(f["parts"].as_array().unwrap().len(), parts.len());
+    let o = physnap(&[
+        "eval",
+        "shape",
+        "--weights",
+        s(&weights),
+        "--data",
+        s(&data),
+        "--fit-codes",
+        "5",
+        "--write-manifest",
+    ]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("--write-manifest") && err.contains("--fit-codes 5"),
+        "{err}"
+    );
     // `eval generative` at toy scale: category accuracy searches the whole test split.
     let report = root.path().join("generative.json");
     let out = ok(&[

@@ -782,24 +782,20 @@ mod tests {
     /// points and codes: the host path matches the burn decoder.
     #[test]
     fn matches_the_burn_decoder() {
+        let small = ShapePriorConfig {
+            latent: 16,
+            decoder_hidden: 24,
+            decoder_blocks: 3,
+            encoder_hidden: 8,
+            encoder_blocks: 1,
+            pe_freqs: 4,
+            code_every_block: false,
+        };
         for cfg in [
+            small,
             ShapePriorConfig {
-                latent: 16,
-                decoder_hidden: 24,
-                decoder_blocks: 3,
-                encoder_hidden: 8,
-                encoder_blocks: 1,
-                pe_freqs: 4,
-                code_every_block: false,
-            },
-            ShapePriorConfig {
-                latent: 16,
-                decoder_hidden: 24,
-                decoder_blocks: 3,
-                encoder_hidden: 8,
-                encoder_blocks: 1,
-                pe_freqs: 4,
                 code_every_block: true,
+                ..small
             },
             ShapePriorConfig {
                 pe_freqs: 0,

@@ -697,8 +697,11 @@ fn evaluate(
     let mut codes = model
         .encoder
         .encode(Tensor::from_data(TensorData::new(surf, [v, s, 3]), &device));
+    // The grid decodes (and the code fitting) run on the value-only host decoder (same
+    // function, 3-4× faster).
+    let host = HostDecoder::new(&model.decoder);
     if fit_steps > 0 {
-        let fitted = fit_codes(&model.decoder, to_vec(codes), val, q, fit_steps);
+        let fitted = fit_codes(&model.decoder, &host, to_vec(codes), val, q, fit_steps);
         codes = Tensor::from_data(
             TensorData::new(fitted, [v, model.decoder.latent()]),
             &device,
@@ -717,8 +720,6 @@ fn evaluate(
         .map(|(a, b)| (a - b).abs() as f64)
         .sum::<f64>()
         / (v * q) as f64;
-    // The grid decodes run on the value-only host decoder (same function, 3-4× faster).
-    let host = HostDecoder::new(&model.decoder);
     let features = to_vec(features);
     let grid: Vec<[f32; 3]> = grid.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
     let n = grid.len();
@@ -838,12 +839,12 @@ pub const FIT_LR: f32 = 1e-2;
 /// the encoder finds.
 fn fit_codes(
     decoder: &ShapeDecoder,
+    host: &HostDecoder,
     mut codes: Vec<f32>,
     val: &[ValPart],
     q: usize,
     steps: usize,
 ) -> Vec<f32> {
-    let host = HostDecoder::new(decoder);
     let (f, fw) = (host.latent(), host.feature_width());
     let w_c = to_vec(decoder.fc_c.weight.val()); // [F, fw], row-major
     let pts: Vec<[f32; 3]> = val
@@ -891,23 +892,6 @@ pub fn save_shape_prior(model: &ShapePrior, path: &Path) -> Result<(), TrainErro
         .valid()
         .save_into(&mut store)
         .map_err(|e| TrainError::data(path, e.to_string()))
-}
-
-/// [`load_shape_prior`], refusing a file whose sha256 is not `sha` (a checkpoint's record).
-fn load_shape_prior_checked(
-    path: &Path,
-    cfg: &ShapePriorConfig,
-    sha: &str,
-    device: &Device,
-) -> Result<ShapePrior, TrainError> {
-    let bytes = std::fs::read(path).map_err(TrainError::io(path))?;
-    if crate::model::weights::sha256_hex(&bytes) != sha {
-        return Err(TrainError::data(
-            path,
-            "sha256 differs from the one the checkpoint recorded: the checkpoint is incomplete",
-        ));
-    }
-    load_shape_prior(path, cfg, device)
 }
 
 /// Load weights written by [`save_shape_prior`] into a model of size `cfg` on `device`.
@@ -969,7 +953,7 @@ pub fn load_shape_dir(
     let cfg = model_config_of(&doc, &doc_path)?;
     let weights = dir.join(WEIGHTS_FILE);
     if doc_path.ends_with(CHECKPOINT_FILE) {
-        check_checkpoint_weights(&weights, &doc, &doc_path)?;
+        check_checkpoint_weights(&weights, &doc["weights_sha256"], &doc_path)?;
     }
     let model = load_shape_prior(&weights, &cfg, device)?;
     Ok((model, cfg, doc))
@@ -1439,8 +1423,9 @@ struct Checkpoint {
     curve: Vec<EvalPoint>,
     train_s: f64,
     elapsed_s: f64,
-    /// EMA updates so far and the sha256 of [`EMA_CHECKPOINT_FILE`] (runs with an EMA).
-    ema: Option<(usize, String)>,
+    /// EMA updates so far (runs with an EMA; the shadow is [`EMA_CHECKPOINT_FILE`]). Taken
+    /// from the trainer when writing.
+    ema_steps: Option<usize>,
 }
 
 /// Weights (temp file + rename), then `shape_checkpoint.json` (atomic) with the weights'
@@ -1451,28 +1436,25 @@ fn write_checkpoint(
     trainer: &Trainer<'_>,
     c: &Checkpoint,
 ) -> Result<(), TrainError> {
-    let weights = out.join(WEIGHTS_FILE);
+    // Weights go to a temp file, are hashed, then renamed into place.
     let tmp = out.join("shape_prior.checkpoint.tmp");
-    save_shape_prior(
-        trainer
-            .model
-            .as_ref()
-            .expect("model is present between steps"),
-        &tmp,
-    )?;
-    let bytes = std::fs::read(&tmp).map_err(TrainError::io(&tmp))?;
-    std::fs::rename(&tmp, &weights).map_err(TrainError::io(&weights))?;
+    let save = |model: &ShapePrior, file: &str| -> Result<String, TrainError> {
+        save_shape_prior(model, &tmp)?;
+        let bytes = std::fs::read(&tmp).map_err(TrainError::io(&tmp))?;
+        let dest = out.join(file);
+        std::fs::rename(&tmp, &dest).map_err(TrainError::io(&dest))?;
+        Ok(crate::model::weights::sha256_hex(&bytes))
+    };
+    let raw = trainer
+        .model
+        .as_ref()
+        .expect("model is present between steps");
+    let weights_sha = save(raw, WEIGHTS_FILE)?;
     let ema = match &trainer.ema {
-        Some(ema) => {
-            let path = out.join(EMA_CHECKPOINT_FILE);
-            save_shape_prior(&trainer.inference_model(), &tmp)?;
-            let ema_bytes = std::fs::read(&tmp).map_err(TrainError::io(&tmp))?;
-            std::fs::rename(&tmp, &path).map_err(TrainError::io(&path))?;
-            json!({
-                "steps": ema.steps,
-                "sha256": crate::model::weights::sha256_hex(&ema_bytes),
-            })
-        }
+        Some(ema) => json!({
+            "steps": ema.steps,
+            "sha256": save(&trainer.inference_model(), EMA_CHECKPOINT_FILE)?,
+        }),
         None => Value::Null,
     };
     let doc = json!({
@@ -1480,7 +1462,7 @@ fn write_checkpoint(
         "format": CHECKPOINT_FORMAT,
         "step": c.step,
         "config": cfg.to_json(),
-        "weights_sha256": crate::model::weights::sha256_hex(&bytes),
+        "weights_sha256": weights_sha,
         "rng_state": c.rng_state.to_string(),
         "epoch": c.epoch,
         "losses": c.losses,
@@ -1494,15 +1476,15 @@ fn write_checkpoint(
     )
 }
 
-/// Refuse `weights` unless its sha256 is the `weights_sha256` the checkpoint document `doc`
-/// (read from `doc_path`) recorded: a run killed between the two writes leaves them apart.
+/// Refuse `weights` unless its sha256 is `recorded`, the value the checkpoint document (read
+/// from `doc_path`) holds for it: a run killed between the two writes leaves them apart.
 fn check_checkpoint_weights(
     weights: &Path,
-    doc: &Value,
+    recorded: &Value,
     doc_path: &Path,
 ) -> Result<(), TrainError> {
     let bytes = std::fs::read(weights).map_err(TrainError::io(weights))?;
-    if doc["weights_sha256"] != crate::model::weights::sha256_hex(&bytes).as_str() {
+    if *recorded != crate::model::weights::sha256_hex(&bytes).as_str() {
         return Err(TrainError::data(
             weights,
             format!(
@@ -1546,7 +1528,7 @@ fn read_checkpoint(out: &Path, cfg: &ShapeTrainConfig) -> Result<Checkpoint, Tra
             });
         }
     }
-    check_checkpoint_weights(&out.join(WEIGHTS_FILE), &v, &path)?;
+    check_checkpoint_weights(&out.join(WEIGHTS_FILE), &v["weights_sha256"], &path)?;
     let bad = |k: &str| TrainError::data(&path, format!("{k} is missing or malformed"));
     let num = |k: &str| v[k].as_f64().ok_or_else(|| bad(k));
     let step = v["step"].as_u64().ok_or_else(|| bad("step"))? as usize;
@@ -1576,12 +1558,9 @@ fn read_checkpoint(out: &Path, cfg: &ShapeTrainConfig) -> Result<Checkpoint, Tra
             ),
         ));
     }
-    let ema = if cfg.ema_decay > 0.0 {
-        let steps = v["ema"]["steps"].as_u64().ok_or_else(|| bad("ema.steps"))? as usize;
-        let sha = v["ema"]["sha256"]
-            .as_str()
-            .ok_or_else(|| bad("ema.sha256"))?;
-        Some((steps, sha.to_string()))
+    let ema_steps = if cfg.ema_decay > 0.0 {
+        check_checkpoint_weights(&out.join(EMA_CHECKPOINT_FILE), &v["ema"]["sha256"], &path)?;
+        Some(v["ema"]["steps"].as_u64().ok_or_else(|| bad("ema.steps"))? as usize)
     } else {
         None
     };
@@ -1593,7 +1572,7 @@ fn read_checkpoint(out: &Path, cfg: &ShapeTrainConfig) -> Result<Checkpoint, Tra
         curve,
         train_s: num("train_s")?,
         elapsed_s: num("elapsed_s")?,
-        ema,
+        ema_steps,
     })
 }
 
@@ -1643,10 +1622,10 @@ fn run(
             &cfg.model,
             &trainer.device,
         )?);
-        if let Some((steps, sha)) = &c.ema {
+        if let Some(steps) = c.ema_steps {
             let path = out.join(EMA_CHECKPOINT_FILE);
-            let averaged = load_shape_prior_checked(&path, &cfg.model, sha, &trainer.device)?;
-            trainer.ema = Some(Ema::new(&averaged, cfg.ema_decay, *steps));
+            let averaged = load_shape_prior(&path, &cfg.model, &trainer.device)?;
+            trainer.ema = Some(Ema::new(&averaged, cfg.ema_decay, steps));
         }
         trainer.rng = Rng::from_state(c.rng_state);
         trainer.epoch = c.epoch;
@@ -1699,7 +1678,7 @@ fn run(
                     curve: curve.clone(),
                     train_s,
                     elapsed_s: elapsed_before + t_train.elapsed().as_secs_f64(),
-                    ema: None,
+                    ema_steps: None,
                 },
             )?;
         }

@@ -413,6 +413,9 @@ struct DiffusionArgs {
     /// schedule still spans --steps; continue with --resume). For splitting long runs.
     #[arg(long, env = "PHYSNAP_DIFFUSION_STOP_AT")]
     stop_at: Option<usize>,
+    /// Min-SNR-γ loss weighting: each sample's ε-loss × min(1, γ/SNR(t)); 0 = off (NAP).
+    #[arg(long, env = "PHYSNAP_DIFFUSION_MIN_SNR_GAMMA", default_value_t = 0.0)]
+    min_snr_gamma: f64,
 }
 
 #[derive(Args, Debug)]

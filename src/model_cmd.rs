@@ -168,6 +168,7 @@ pub fn diffusion(a: DiffusionArgs) -> anyhow::Result<()> {
         lr_final_factor: a.lr_final_factor,
         ema_decay: a.ema_decay,
         stop_at: a.stop_at,
+        min_snr_gamma: a.min_snr_gamma,
         ..DiffusionTrainConfig::default()
     };
     let pb = super::progress_bar(cfg.steps, "diffusion");

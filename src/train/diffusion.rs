@@ -13,7 +13,18 @@
 //! L = mean over samples of (L_node + L_edge), clamped to [−100, 100]
 //! ```
 //!
-//! with Adam. Category conditioning: each sample carries its object's category index, replaced
+//! with Adam. Optionally (`min_snr_gamma` = γ > 0; off by default, i.e. NAP's loss) each
+//! sample's L is weighted by Min-SNR-γ (Hang et al., ICCV 2023) before the batch mean:
+//!
+//! ```text
+//! w(t) = min(1, γ / SNR(t)),   SNR(t) = ᾱ_t / (1 − ᾱ_t)
+//! ```
+//!
+//! which damps the low-noise steps (large SNR) whose ε-loss otherwise dominates the gradient,
+//! leaving the mid- and high-noise steps, where an object's coarse layout and category are
+//! decided, a larger share.
+//!
+//! Category conditioning: each sample carries its object's category index, replaced
 //! by the "no category" row with probability `category_dropout`, so one model serves both the
 //! category-aware and the unconditional mode.
 //!
@@ -88,9 +99,22 @@ pub struct DiffusionTrainConfig {
     /// End this run after this many steps in total (a checkpoint is written there; the
     /// schedule still runs to `steps`, so `--resume` continues the same run). None: `steps`.
     pub stop_at: Option<usize>,
+    /// Min-SNR-γ loss weighting (Hang et al., ICCV 2023): each sample's ε-loss is weighted by
+    /// `min(1, γ / SNR(t))`. 0 = off (NAP's unweighted loss).
+    pub min_snr_gamma: f64,
 }
 
 impl DiffusionTrainConfig {
+    /// The loss weight of a sample at noise coefficients `(√ᾱ_t, √(1 − ᾱ_t))`: 1 without
+    /// min-SNR weighting, else `min(1, γ / SNR)` with `SNR = ᾱ_t / (1 − ᾱ_t)`.
+    pub fn loss_weight(&self, sqrt_alpha_bar: f64, sqrt_one_minus: f64) -> f64 {
+        if self.min_snr_gamma <= 0.0 {
+            return 1.0;
+        }
+        let snr = (sqrt_alpha_bar * sqrt_alpha_bar) / (sqrt_one_minus * sqrt_one_minus).max(1e-20);
+        (self.min_snr_gamma / snr).min(1.0)
+    }
+
     /// The learning rate of step `step` (0-based); see the module documentation.
     pub fn lr_at(&self, step: usize) -> f64 {
         if step < self.lr_decay_start || self.steps <= self.lr_decay_start + 1 {
@@ -118,6 +142,7 @@ impl Default for DiffusionTrainConfig {
             lr_final_factor: 0.1,
             ema_decay: 0.999,
             stop_at: None,
+            min_snr_gamma: 0.0,
         }
     }
 }
@@ -159,6 +184,13 @@ fn read_json(path: &Path) -> Result<Value, TrainError> {
 /// Load the training split with latent codes from the shape prior's codebook
 /// (`shape/codebook.npy` + `shape/codebook.json`).
 pub fn load_data(data: &Path, shape: &Path) -> Result<DiffusionData, TrainError> {
+    load_split(data, shape, "train")
+}
+
+/// Load one split (`train`, `val` or `test`) with its latent codes, as [`load_data`] does for
+/// the training split. The feature scales are always fitted on that split's graphs and the
+/// whole codebook; callers measuring a trained model use the manifest's scales instead.
+pub fn load_split(data: &Path, shape: &Path, split: &str) -> Result<DiffusionData, TrainError> {
     let index = read_json(&data.join("dataset.json"))?;
     let book = super::shape::read_codebook(shape, crate::object::LATENT_DIM)?;
     let (cols, codes) = (book.cols, &book.codes);
@@ -181,7 +213,7 @@ pub fn load_data(data: &Path, shape: &Path) -> Result<DiffusionData, TrainError>
     let mut graphs = Vec::new();
     let mut categories = Vec::new();
     for o in index["objects"].as_array().into_iter().flatten() {
-        if o["split"] != "train" {
+        if o["split"] != split {
             continue;
         }
         let id = o["id"].as_str().unwrap_or_default();
@@ -205,7 +237,10 @@ pub fn load_data(data: &Path, shape: &Path) -> Result<DiffusionData, TrainError>
         categories.push(o["category_index"].as_u64().unwrap_or(0) as usize);
     }
     if graphs.is_empty() {
-        return Err(data_err(&data.join("dataset.json"), "no training objects"));
+        return Err(data_err(
+            &data.join("dataset.json"),
+            format!("no {split} objects"),
+        ));
     }
     let scales = FeatureScales::fit(&graphs, codes.chunks_exact(cols));
     Ok(DiffusionData {
@@ -222,6 +257,19 @@ pub fn grouped_loss(
     eps_v: Tensor<3>,
     eps_e: Tensor<3>,
 ) -> Tensor<1> {
+    grouped_loss_per_sample(pred_v, pred_e, eps_v, eps_e)
+        .mean()
+        .clamp(-100.0, 100.0)
+}
+
+/// NAP's grouped loss of each sample of the batch, `[B]` (not clamped).
+pub fn grouped_loss_per_sample(
+    pred_v: Tensor<3>,
+    pred_e: Tensor<3>,
+    eps_v: Tensor<3>,
+    eps_e: Tensor<3>,
+) -> Tensor<1> {
+    let b = pred_v.dims()[0];
     let ev = (pred_v - eps_v).powi_scalar(2).mean_dim(1); // [B, 1, 135]
     let ee = (pred_e - eps_e).powi_scalar(2).mean_dim(1); // [B, 1, 13]
     let group = |x: &Tensor<3>, a: usize, b: usize| x.clone().narrow(2, a, b - a).mean_dim(2);
@@ -233,7 +281,7 @@ pub fn grouped_loss(
     let edge = group(&ee, edge_ch::CLASS, edge_ch::DIR)
         + group(&ee, edge_ch::DIR, edge_ch::REVOLUTE)
         + group(&ee, edge_ch::REVOLUTE, EDGE_DIM);
-    (node + edge).mean().clamp(-100.0, 100.0)
+    (node + edge).reshape([b])
 }
 
 /// What the run did.
@@ -304,6 +352,12 @@ pub fn train_diffusion(
             (0.0..1.0).contains(&cfg.ema_decay),
             "within [0, 1)",
             cfg.ema_decay.to_string(),
+        ),
+        (
+            "min_snr_gamma",
+            cfg.min_snr_gamma >= 0.0 && cfg.min_snr_gamma.is_finite(),
+            ">= 0 and finite (0 = off)",
+            cfg.min_snr_gamma.to_string(),
         ),
         (
             "stop_at",
@@ -404,6 +458,14 @@ pub fn train_diffusion(
                 (a as f32, b as f32)
             })
             .unzip();
+        let weights = (cfg.min_snr_gamma > 0.0).then(|| {
+            let w: Vec<f32> = sa
+                .iter()
+                .zip(&sb)
+                .map(|(&a, &b)| cfg.loss_weight(a as f64, b as f64) as f32)
+                .collect();
+            Tensor::<1>::from_data(TensorData::new(w, [bsz]), &device)
+        });
         let sa = Tensor::<3>::from_data(TensorData::new(sa, [bsz, 1, 1]), &device);
         let sb = Tensor::<3>::from_data(TensorData::new(sb, [bsz, 1, 1]), &device);
         let vt = v0 * sa.clone() + eps_v.clone() * sb.clone();
@@ -419,7 +481,12 @@ pub fn train_diffusion(
             )
         });
         let (pv, pe) = model.forward(vt, et, t, category);
-        let loss = grouped_loss(pv, pe, eps_v, eps_e);
+        let loss = match weights {
+            None => grouped_loss(pv, pe, eps_v, eps_e),
+            Some(w) => (grouped_loss_per_sample(pv, pe, eps_v, eps_e) * w)
+                .mean()
+                .clamp(-100.0, 100.0),
+        };
         let value: f64 = loss
             .clone()
             .into_data()
@@ -481,6 +548,7 @@ pub fn train_diffusion(
         "lr_decay_start": cfg.lr_decay_start, "lr_final_factor": cfg.lr_final_factor,
         "ema_decay": cfg.ema_decay, "ema_steps": shadow.as_ref().map_or(0, |e| e.steps),
         "seed": cfg.seed, "category_dropout": cfg.category_dropout,
+        "min_snr_gamma": cfg.min_snr_gamma,
         "feature_scales": { "node": data.scales.node, "edge": data.scales.edge },
         "categories": CATEGORIES.to_vec(), "train_objects": data.graphs.len(), "sha256": sha,
     });
@@ -560,6 +628,7 @@ mod tests {
             lr_final_factor: 0.1,
             ema_decay: 0.9,
             stop_at: None,
+            min_snr_gamma: 0.0,
         }
     }
 
@@ -635,6 +704,55 @@ mod tests {
             ..tiny_config(10)
         });
         assert!(e.contains("stop_at") && e.contains("11"), "{e}");
+        let e = err(DiffusionTrainConfig {
+            min_snr_gamma: -1.0,
+            ..tiny_config(10)
+        });
+        assert!(e.contains("min_snr_gamma") && e.contains("-1"), "{e}");
+    }
+
+    #[test]
+    fn min_snr_weights_damp_only_the_low_noise_steps() {
+        let schedule = Schedule::default();
+        let off = DiffusionTrainConfig::default();
+        let on = DiffusionTrainConfig {
+            min_snr_gamma: 5.0,
+            ..DiffusionTrainConfig::default()
+        };
+        for t in [0, 10, 100, 500, 999] {
+            let (a, b) = schedule.noise_coefficients(t);
+            assert_eq!(off.loss_weight(a, b), 1.0);
+            let snr = a * a / (b * b);
+            let w = on.loss_weight(a, b);
+            assert!((w - (5.0 / snr).min(1.0)).abs() < 1e-12, "t={t}: {w}");
+        }
+        // Low noise (SNR ≫ γ) is damped, high noise is left at 1.
+        let (a, b) = schedule.noise_coefficients(5);
+        assert!(on.loss_weight(a, b) < 0.1);
+        let (a, b) = schedule.noise_coefficients(500);
+        assert_eq!(on.loss_weight(a, b), 1.0);
+    }
+
+    #[test]
+    fn min_snr_training_lowers_the_loss_and_records_gamma() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut losses = Vec::new();
+        let cfg = DiffusionTrainConfig {
+            min_snr_gamma: 5.0,
+            ..tiny_config(60)
+        };
+        train_diffusion(&tiny_data(), &cfg, dir.path(), false, &mut |p| {
+            losses.push(p.loss)
+        })
+        .unwrap();
+        let first: f64 = losses[..10].iter().sum::<f64>() / 10.0;
+        let last: f64 = losses[50..].iter().sum::<f64>() / 10.0;
+        assert!(last < 0.8 * first, "loss did not fall: {first} -> {last}");
+        let summary: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(dir.path().join("diffusion_train.json")).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(summary["min_snr_gamma"], 5.0);
     }
 
     #[test]

@@ -319,7 +319,6 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
                 samples: a.per_category,
                 category: Some(idx),
                 category_guidance: a.category.category_guidance,
-                category_rerank: a.category.category_rerank,
                 ..base.clone()
             };
             for g in sample_set(&models, req, &pb)? {

@@ -463,10 +463,6 @@ struct CategoryGuidanceArgs {
     /// ε̂ = ε̂(c) + w·(ε̂(c) − ε̂(∅)) (0: plain conditioning; > 0 doubles the denoiser's work).
     #[arg(long, env = "PHYSNAP_CATEGORY_GUIDANCE", default_value_t = physnap::engine::sample::DEFAULT_CATEGORY_GUIDANCE)]
     category_guidance: f64,
-    /// Candidates drawn per category-conditioned sample; the one the denoiser scores as most
-    /// of the category is kept (1: no reranking; costs about N times the sampling).
-    #[arg(long, env = "PHYSNAP_CATEGORY_RERANK", default_value_t = 1)]
-    category_rerank: usize,
 }
 
 /// Sampler and guidance-schedule flags shared by `generate` and `eval guided`.

@@ -347,7 +347,6 @@ pub fn generate(a: GenerateArgs) -> anyhow::Result<()> {
         steps: a.sampling.steps,
         retrieval: retrieval_mode(&a.sampling.retrieval, &models)?,
         category_guidance: a.sampling.category.category_guidance,
-        category_rerank: a.sampling.category.category_rerank,
         joint_motion: joint_motion(&a.sampling.joint_motion)?,
         ..Default::default()
     };
@@ -667,7 +666,6 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         },
         retrieval: retrieval_mode(&a.sampling.retrieval, &models)?,
         category_guidance: a.sampling.category.category_guidance,
-        category_rerank: a.sampling.category.category_rerank,
         joint_motion: joint_motion(&a.sampling.joint_motion)?,
     };
     opts.id.validate()?;

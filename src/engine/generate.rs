@@ -14,11 +14,6 @@
 //! The replaced parts are listed in [`Generated::retrieved`]; `raw` stays the graph the model
 //! produced, `object` carries the retrieved codes.
 //!
-//! Category reranking ([`GenerateRequest::category_rerank`] = M > 1, category-conditioned
-//! samples only): sample i draws M candidates in one batch from seed + i and keeps the one
-//! with the largest [`super::rerank::category_scores`]; the scores are in
-//! [`Generated::rerank_scores`].
-//!
 //! Joint motions: with [`JointMotion::Dominant`] the projection keeps only each joint's wider
 //! range, compared in units of the range channels' feature scales ([`range_units`]); the
 //! engine's default is NAP's (every joint a screw), the CLI and the service default to
@@ -155,10 +150,6 @@ pub struct GenerateRequest {
     pub category_guidance: f64,
     /// How many motions each joint keeps.
     pub joint_motion: JointMotion,
-    /// Candidates drawn per category-conditioned sample, of which the one with the highest
-    /// category score is kept ([`super::rerank`]); 0 and 1: no reranking. Ignored without a
-    /// category.
-    pub category_rerank: usize,
 }
 
 /// One generated sample.
@@ -176,9 +167,6 @@ pub struct Generated {
     pub meshes: Vec<TriMesh>,
     /// Parts whose code was replaced by the nearest codebook code, ascending.
     pub retrieved: Vec<usize>,
-    /// Category scores of the reranked candidates (empty without reranking); the kept sample
-    /// is the one with the largest.
-    pub rerank_scores: Vec<f64>,
 }
 
 /// Progress of a generation request.
@@ -264,17 +252,6 @@ pub fn generate_with(
         }
         _ => None,
     };
-    if req.category_rerank > super::rerank::MAX_CANDIDATES {
-        return Err(EngineError::Invalid {
-            field: "category_rerank".into(),
-            limit: format!("at most {}", super::rerank::MAX_CANDIDATES),
-            value: req.category_rerank.to_string(),
-        });
-    }
-    let candidates = match req.category {
-        Some(_) => req.category_rerank.max(1),
-        None => 1,
-    };
     let device = crate::model::cpu();
     let mut out = Vec::with_capacity(req.samples);
     for i in 0..req.samples {
@@ -284,7 +261,7 @@ pub fn generate_with(
             schedule,
             &SampleRequest {
                 seed,
-                batch: candidates,
+                batch: 1,
                 category: req.category,
                 preview_every: req.preview_every,
                 guidance: req.guidance.clone(),
@@ -301,15 +278,7 @@ pub fn generate_with(
                 })
             },
         )?;
-        let (kept, rerank_scores) = match req.category {
-            Some(c) if candidates > 1 => {
-                let scores =
-                    super::rerank::category_scores(denoiser, schedule, &graphs, c, seed, &device);
-                (super::rerank::best(&scores).unwrap_or(0), scores)
-            }
-            _ => (0, Vec::new()),
-        };
-        let raw = graphs[kept].unscaled(scales);
+        let raw = graphs[0].unscaled(scales);
         let mut object = project(
             &raw,
             &ProjectOptions {
@@ -359,7 +328,6 @@ pub fn generate_with(
             object,
             meshes,
             retrieved,
-            rerank_scores,
         });
     }
     Ok(out)
@@ -609,80 +577,6 @@ mod tests {
         assert_eq!(steps, 0);
         assert_eq!(Retrieval::Category.without_category(), Retrieval::Empty);
         assert_eq!(Retrieval::All.without_category(), Retrieval::All);
-    }
-
-    #[test]
-    fn category_rerank_keeps_the_best_scoring_candidate() {
-        let denoiser = tiny_denoiser(3);
-        let (scales, schedule) = (FeatureScales::default(), Schedule::default());
-        let run = |r: &GenerateRequest| {
-            generate(
-                &denoiser,
-                &Spheres,
-                None,
-                &scales,
-                &schedule,
-                r,
-                &mut |_| ControlFlow::Continue(()),
-            )
-        };
-        let req = GenerateRequest {
-            seed: 11,
-            samples: 2,
-            steps: 5,
-            category: Some(1),
-            category_rerank: 3,
-            ..Default::default()
-        };
-        let got = run(&req).unwrap();
-        let device = crate::model::cpu();
-        for g in &got {
-            assert_eq!(g.rerank_scores.len(), 3);
-            // The kept graph is the batch's best-scoring candidate: rebuild the batch.
-            let batch = crate::engine::sample::sample(
-                &denoiser,
-                &schedule,
-                &SampleRequest {
-                    seed: g.seed,
-                    batch: 3,
-                    category: Some(1),
-                    steps: 5,
-                    ..Default::default()
-                },
-                &device,
-                &mut |_| ControlFlow::Continue(()),
-            )
-            .unwrap();
-            let scores = super::super::rerank::category_scores(
-                &denoiser, &schedule, &batch, 1, g.seed, &device,
-            );
-            assert_eq!(scores, g.rerank_scores);
-            let best = super::super::rerank::best(&scores).unwrap();
-            assert_eq!(g.raw, batch[best].unscaled(&scales));
-        }
-        // Unconditional requests ignore it; 1 is off; over the limit is refused by name.
-        let plain = run(&GenerateRequest {
-            category: None,
-            ..req.clone()
-        })
-        .unwrap();
-        assert!(plain.iter().all(|g| g.rerank_scores.is_empty()));
-        let off = run(&GenerateRequest {
-            category_rerank: 1,
-            ..req.clone()
-        })
-        .unwrap();
-        assert!(off.iter().all(|g| g.rerank_scores.is_empty()));
-        let e = run(&GenerateRequest {
-            category_rerank: 33,
-            ..req.clone()
-        })
-        .unwrap_err()
-        .to_string();
-        assert!(
-            e.contains("category_rerank") && e.contains("33") && e.contains("32"),
-            "{e}"
-        );
     }
 
     #[test]

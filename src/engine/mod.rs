@@ -7,7 +7,6 @@
 
 pub mod generate;
 pub mod guidance;
-pub mod rerank;
 pub mod sample;
 pub mod schedule;
 

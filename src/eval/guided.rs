@@ -269,8 +269,6 @@ pub struct TableOptions {
     pub retrieval: Retrieval,
     /// Classifier-free category guidance of the category-aware rows.
     pub category_guidance: f64,
-    /// Candidates per category-conditioned sample, best category score kept (0, 1: off).
-    pub category_rerank: usize,
     /// How many motions each joint keeps; see [`GenerateRequest::joint_motion`].
     pub joint_motion: JointMotion,
 }
@@ -623,7 +621,6 @@ pub fn run_rows(
                             None => opts.retrieval.without_category(),
                         },
                         category_guidance: opts.category_guidance,
-                        category_rerank: opts.category_rerank,
                         joint_motion: opts.joint_motion,
                         ..Default::default()
                     };
@@ -908,7 +905,6 @@ mod tests {
             id: IdOptions::default(),
             retrieval: Retrieval::Off,
             category_guidance: 0.0,
-            category_rerank: 0,
             joint_motion: JointMotion::Screw,
         };
         let mut calls = 0;

@@ -47,7 +47,7 @@ use burn::tensor::{Device, Int, Shape, Tensor, TensorData};
 
 use super::ModelError;
 use crate::data::rng::Rng;
-use crate::graph::{EDGE_DIM, EDGE_PAIRS, K, NODE_DIM, NUM_EDGES, edge_ch, edge_index, node_ch};
+use crate::graph::{EDGE_DIM, EDGE_PAIRS, K, NODE_DIM, NUM_EDGES, edge_index};
 use crate::object::LATENT_DIM;
 
 /// Seed of [`Denoiser::new`] (NAP's training seed).
@@ -763,35 +763,6 @@ impl Denoiser {
         }
         g
     }
-}
-
-/// NAP's grouped ε-loss of each sample of the batch, `[B]` (not clamped): the training
-/// objective (`train::diffusion`) and the category score of `engine::rerank`.
-///
-/// ```text
-/// e = (ε − ε̂)², averaged over the 8 node slots / 28 edge rows
-/// L_node = ¼ [e_o + mean(e_b) + mean(e_t) + mean(e_s)]
-/// L_edge = mean(e_c̃) + mean(e_Plücker) + mean(e_ρ)
-/// ```
-pub fn grouped_loss_per_sample(
-    pred_v: Tensor<3>,
-    pred_e: Tensor<3>,
-    eps_v: Tensor<3>,
-    eps_e: Tensor<3>,
-) -> Tensor<1> {
-    let b = pred_v.dims()[0];
-    let ev = (pred_v - eps_v).powi_scalar(2).mean_dim(1); // [B, 1, 135]
-    let ee = (pred_e - eps_e).powi_scalar(2).mean_dim(1); // [B, 1, 13]
-    let group = |x: &Tensor<3>, a: usize, b: usize| x.clone().narrow(2, a, b - a).mean_dim(2);
-    let node = (group(&ev, node_ch::EXIST, node_ch::BOX)
-        + group(&ev, node_ch::BOX, node_ch::CENTER)
-        + group(&ev, node_ch::CENTER, node_ch::LATENT)
-        + group(&ev, node_ch::LATENT, NODE_DIM))
-        / 4.0;
-    let edge = group(&ee, edge_ch::CLASS, edge_ch::DIR)
-        + group(&ee, edge_ch::DIR, edge_ch::REVOLUTE)
-        + group(&ee, edge_ch::REVOLUTE, EDGE_DIM);
-    (node + edge).reshape([b])
 }
 
 #[cfg(test)]

@@ -285,8 +285,6 @@ pub fn run_job(
         retrieval: spec.engine_retrieval(),
         category_guidance: spec.category_guidance,
         joint_motion: spec.engine_joint_motion(),
-        // Not offered by the service's API (yet): one sample per seed, as before.
-        category_rerank: 0,
     };
     let decoder = LatentSdfDecoder::new(&m.shape_prior.decoder);
     let started = Instant::now();

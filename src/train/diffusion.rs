@@ -64,9 +64,10 @@ use super::ema::Ema;
 use crate::data::categories::CATEGORIES;
 use crate::data::rng::Rng;
 use crate::engine::schedule::Schedule;
-use crate::graph::{EDGE_DIM, FeatureScales, GraphTensor, K, NODE_DIM, NUM_EDGES, node_ch};
+use crate::graph::{
+    EDGE_DIM, FeatureScales, GraphTensor, K, NODE_DIM, NUM_EDGES, edge_ch, node_ch,
+};
 use crate::io::npy;
-pub use crate::model::denoiser::grouped_loss_per_sample;
 use crate::model::denoiser::{Denoiser, DenoiserConfig};
 use crate::model::{cpu_autodiff, weights};
 
@@ -259,6 +260,28 @@ pub fn grouped_loss(
     grouped_loss_per_sample(pred_v, pred_e, eps_v, eps_e)
         .mean()
         .clamp(-100.0, 100.0)
+}
+
+/// NAP's grouped loss of each sample of the batch, `[B]` (not clamped).
+pub fn grouped_loss_per_sample(
+    pred_v: Tensor<3>,
+    pred_e: Tensor<3>,
+    eps_v: Tensor<3>,
+    eps_e: Tensor<3>,
+) -> Tensor<1> {
+    let b = pred_v.dims()[0];
+    let ev = (pred_v - eps_v).powi_scalar(2).mean_dim(1); // [B, 1, 135]
+    let ee = (pred_e - eps_e).powi_scalar(2).mean_dim(1); // [B, 1, 13]
+    let group = |x: &Tensor<3>, a: usize, b: usize| x.clone().narrow(2, a, b - a).mean_dim(2);
+    let node = (group(&ev, node_ch::EXIST, node_ch::BOX)
+        + group(&ev, node_ch::BOX, node_ch::CENTER)
+        + group(&ev, node_ch::CENTER, node_ch::LATENT)
+        + group(&ev, node_ch::LATENT, NODE_DIM))
+        / 4.0;
+    let edge = group(&ee, edge_ch::CLASS, edge_ch::DIR)
+        + group(&ee, edge_ch::DIR, edge_ch::REVOLUTE)
+        + group(&ee, edge_ch::REVOLUTE, EDGE_DIM);
+    (node + edge).reshape([b])
 }
 
 /// What the run did.

@@ -416,6 +416,10 @@ struct DiffusionArgs {
     /// Min-SNR-γ loss weighting: each sample's ε-loss × min(1, γ/SNR(t)); 0 = off (NAP).
     #[arg(long, env = "PHYSNAP_DIFFUSION_MIN_SNR_GAMMA", default_value_t = 0.0)]
     min_snr_gamma: f64,
+    /// High-noise weighting: each sample's ε-loss × clamp(1/SNR(t), 1, CAP), an x̂₀-loss at
+    /// high noise up to the cap; 1 = off (NAP).
+    #[arg(long, env = "PHYSNAP_DIFFUSION_HIGH_NOISE_CAP", default_value_t = 1.0)]
+    high_noise_cap: f64,
 }
 
 #[derive(Args, Debug)]

@@ -169,6 +169,7 @@ pub fn diffusion(a: DiffusionArgs) -> anyhow::Result<()> {
         ema_decay: a.ema_decay,
         stop_at: a.stop_at,
         min_snr_gamma: a.min_snr_gamma,
+        high_noise_cap: a.high_noise_cap,
         ..DiffusionTrainConfig::default()
     };
     let pb = super::progress_bar(cfg.steps, "diffusion");

@@ -25,6 +25,15 @@
 //! decided, a larger share. Measured with γ = 5 on the shipped recipe it gave no gain
 //! (EVALUATION.md, "Category conditioning"), so the shipped weights are trained without it.
 //!
+//! The other end (`high_noise_cap` = C > 1; off by default): the capped truncated-SNR weight
+//!
+//! ```text
+//! w(t) = clamp(1 / SNR(t), 1, C)
+//! ```
+//!
+//! turns the high-noise steps' ε-loss into an x̂₀-loss (ε-MSE / SNR = x̂₀-MSE), up to the cap,
+//! where what there is to learn is the category's typical layout. Both weights multiply.
+//!
 //! Category conditioning: each sample carries its object's category index, replaced
 //! by the "no category" row with probability `category_dropout`, so one model serves both the
 //! category-aware and the unconditional mode.
@@ -103,17 +112,30 @@ pub struct DiffusionTrainConfig {
     /// Min-SNR-γ loss weighting (Hang et al., ICCV 2023): each sample's ε-loss is weighted by
     /// `min(1, γ / SNR(t))`. 0 = off (NAP's unweighted loss).
     pub min_snr_gamma: f64,
+    /// Capped truncated-SNR weighting of the high-noise steps: each sample's ε-loss is also
+    /// weighted by `clamp(1 / SNR(t), 1, cap)`. 1 (or less) = off (NAP's unweighted loss).
+    pub high_noise_cap: f64,
 }
 
 impl DiffusionTrainConfig {
-    /// The loss weight of a sample at noise coefficients `(√ᾱ_t, √(1 − ᾱ_t))`: 1 without
-    /// min-SNR weighting, else `min(1, γ / SNR)` with `SNR = ᾱ_t / (1 − ᾱ_t)`.
+    /// Whether any per-sample loss weighting is on.
+    pub fn weighted(&self) -> bool {
+        self.min_snr_gamma > 0.0 || self.high_noise_cap > 1.0
+    }
+
+    /// The loss weight of a sample at noise coefficients `(√ᾱ_t, √(1 − ᾱ_t))`, with
+    /// `SNR = ᾱ_t / (1 − ᾱ_t)`: `min(1, γ / SNR)` when min-SNR weighting is on, times
+    /// `clamp(1 / SNR, 1, cap)` when the high-noise cap is on; 1 with both off.
     pub fn loss_weight(&self, sqrt_alpha_bar: f64, sqrt_one_minus: f64) -> f64 {
-        if self.min_snr_gamma <= 0.0 {
-            return 1.0;
-        }
         let snr = (sqrt_alpha_bar * sqrt_alpha_bar) / (sqrt_one_minus * sqrt_one_minus).max(1e-20);
-        (self.min_snr_gamma / snr).min(1.0)
+        let mut w = 1.0;
+        if self.min_snr_gamma > 0.0 {
+            w *= (self.min_snr_gamma / snr).min(1.0);
+        }
+        if self.high_noise_cap > 1.0 {
+            w *= (1.0 / snr.max(1e-20)).clamp(1.0, self.high_noise_cap);
+        }
+        w
     }
 
     /// The learning rate of step `step` (0-based); see the module documentation.
@@ -144,6 +166,7 @@ impl Default for DiffusionTrainConfig {
             ema_decay: 0.999,
             stop_at: None,
             min_snr_gamma: 0.0,
+            high_noise_cap: 1.0,
         }
     }
 }
@@ -361,6 +384,12 @@ pub fn train_diffusion(
             cfg.min_snr_gamma.to_string(),
         ),
         (
+            "high_noise_cap",
+            cfg.high_noise_cap.is_finite() && cfg.high_noise_cap <= 1e6,
+            "finite and at most 1e6 (1 or less = off)",
+            cfg.high_noise_cap.to_string(),
+        ),
+        (
             "stop_at",
             cfg.stop_at.is_none_or(|s| (1..=cfg.steps).contains(&s)),
             "within 1..=steps",
@@ -459,7 +488,7 @@ pub fn train_diffusion(
                 (a as f32, b as f32)
             })
             .unzip();
-        let weights = (cfg.min_snr_gamma > 0.0).then(|| {
+        let weights = cfg.weighted().then(|| {
             let w: Vec<f32> = sa
                 .iter()
                 .zip(&sb)
@@ -549,7 +578,7 @@ pub fn train_diffusion(
         "lr_decay_start": cfg.lr_decay_start, "lr_final_factor": cfg.lr_final_factor,
         "ema_decay": cfg.ema_decay, "ema_steps": shadow.as_ref().map_or(0, |e| e.steps),
         "seed": cfg.seed, "category_dropout": cfg.category_dropout,
-        "min_snr_gamma": cfg.min_snr_gamma,
+        "min_snr_gamma": cfg.min_snr_gamma, "high_noise_cap": cfg.high_noise_cap,
         "feature_scales": { "node": data.scales.node, "edge": data.scales.edge },
         "categories": CATEGORIES.to_vec(), "train_objects": data.graphs.len(), "sha256": sha,
     });
@@ -630,6 +659,7 @@ mod tests {
             ema_decay: 0.9,
             stop_at: None,
             min_snr_gamma: 0.0,
+            high_noise_cap: 1.0,
         }
     }
 
@@ -710,6 +740,11 @@ mod tests {
             ..tiny_config(10)
         });
         assert!(e.contains("min_snr_gamma") && e.contains("-1"), "{e}");
+        let e = err(DiffusionTrainConfig {
+            high_noise_cap: f64::INFINITY,
+            ..tiny_config(10)
+        });
+        assert!(e.contains("high_noise_cap") && e.contains("inf"), "{e}");
     }
 
     #[test]
@@ -732,6 +767,39 @@ mod tests {
         assert!(on.loss_weight(a, b) < 0.1);
         let (a, b) = schedule.noise_coefficients(500);
         assert_eq!(on.loss_weight(a, b), 1.0);
+    }
+
+    #[test]
+    fn high_noise_cap_raises_only_the_high_noise_steps() {
+        let schedule = Schedule::default();
+        let cap = DiffusionTrainConfig {
+            high_noise_cap: 100.0,
+            ..DiffusionTrainConfig::default()
+        };
+        assert!(cap.weighted() && !DiffusionTrainConfig::default().weighted());
+        for t in [0, 10, 100, 300, 500, 700, 999] {
+            let (a, b) = schedule.noise_coefficients(t);
+            let snr = a * a / (b * b);
+            let w = cap.loss_weight(a, b);
+            assert!(
+                (w - (1.0 / snr).clamp(1.0, 100.0)).abs() < 1e-9,
+                "t={t}: {w}"
+            );
+        }
+        // Low noise (SNR > 1) keeps weight 1; the noisiest steps reach the cap.
+        let (a, b) = schedule.noise_coefficients(10);
+        assert_eq!(cap.loss_weight(a, b), 1.0);
+        let (a, b) = schedule.noise_coefficients(999);
+        assert_eq!(cap.loss_weight(a, b), 100.0);
+        // Both on: they act on disjoint SNR ranges and multiply.
+        let both = DiffusionTrainConfig {
+            min_snr_gamma: 5.0,
+            ..cap.clone()
+        };
+        let (a, b) = schedule.noise_coefficients(999);
+        assert_eq!(both.loss_weight(a, b), 100.0);
+        let (a, b) = schedule.noise_coefficients(5);
+        assert!(both.loss_weight(a, b) < 0.1);
     }
 
     #[test]

@@ -14,9 +14,8 @@ use std::path::PathBuf;
 use burn::tensor::{Int, Tensor, TensorData};
 use physnap::data::rng::Rng;
 use physnap::engine::schedule::Schedule;
-use physnap::graph::{EDGE_DIM, K, NODE_DIM, NUM_EDGES};
 use physnap::model::cpu;
-use physnap::train::diffusion::{grouped_loss_per_sample, load_split};
+use physnap::train::diffusion::{graph_noise, grouped_loss_per_sample, load_split};
 
 #[global_allocator]
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
@@ -46,19 +45,7 @@ fn main() {
     );
     for &t in &[10usize, 100, 250, 400, 550, 700, 850, 950, 990] {
         let mut rng = Rng::new(7 + t as u64);
-        let randn =
-            |rng: &mut Rng, m: usize| (0..m).map(|_| rng.gauss() as f32).collect::<Vec<_>>();
-        let eps_v = Tensor::<3>::from_data(
-            TensorData::new(randn(&mut rng, n * K * NODE_DIM), [n, K, NODE_DIM]),
-            &device,
-        );
-        let eps_e = Tensor::<3>::from_data(
-            TensorData::new(
-                randn(&mut rng, n * NUM_EDGES * EDGE_DIM),
-                [n, NUM_EDGES, EDGE_DIM],
-            ),
-            &device,
-        );
+        let (eps_v, eps_e) = graph_noise(&mut rng, n, &device);
         let (a, b) = schedule.noise_coefficients(t);
         let vt = v0.clone() * a as f32 + eps_v.clone() * b as f32;
         let et = e0.clone() * a as f32 + eps_e.clone() * b as f32;

@@ -274,16 +274,22 @@ pub fn load_split(data: &Path, shape: &Path, split: &str) -> Result<DiffusionDat
     })
 }
 
-/// NAP's grouped loss on (prediction, target) pairs, per sample, averaged over the batch.
+/// NAP's grouped loss on (prediction, target) pairs, per sample, each times its weight
+/// (`[B]`; None: all 1), averaged over the batch and clamped.
 pub fn grouped_loss(
     pred_v: Tensor<3>,
     pred_e: Tensor<3>,
     eps_v: Tensor<3>,
     eps_e: Tensor<3>,
+    weights: Option<Tensor<1>>,
 ) -> Tensor<1> {
-    grouped_loss_per_sample(pred_v, pred_e, eps_v, eps_e)
-        .mean()
-        .clamp(-100.0, 100.0)
+    let per_sample = grouped_loss_per_sample(pred_v, pred_e, eps_v, eps_e);
+    match weights {
+        Some(w) => per_sample * w,
+        None => per_sample,
+    }
+    .mean()
+    .clamp(-100.0, 100.0)
 }
 
 /// NAP's grouped loss of each sample of the batch, `[B]` (not clamped).
@@ -325,8 +331,19 @@ pub struct DiffusionTrainReport {
     pub sha256: String,
 }
 
-fn randn(rng: &mut Rng, n: usize) -> Vec<f32> {
-    (0..n).map(|_| rng.gauss() as f32).collect()
+/// Standard-normal noise for a batch of `b` graphs, nodes first then edges, drawn from `rng`.
+pub fn graph_noise(
+    rng: &mut Rng,
+    b: usize,
+    device: &burn::tensor::Device,
+) -> (Tensor<3>, Tensor<3>) {
+    let mut randn = |dims: [usize; 3]| {
+        let n = dims.iter().product();
+        let v: Vec<f32> = (0..n).map(|_| rng.gauss() as f32).collect();
+        Tensor::<3>::from_data(TensorData::new(v, dims), device)
+    };
+    let v = randn([b, K, NODE_DIM]);
+    (v, randn([b, NUM_EDGES, EDGE_DIM]))
 }
 
 /// Train (or resume training) the denoiser; writes `denoiser.safetensors`, `checkpoint.json`
@@ -470,17 +487,7 @@ pub fn train_diffusion(
             }
         }
         let (v0, e0) = crate::engine::to_tensors(&x0, &device);
-        let eps_v = Tensor::<3>::from_data(
-            TensorData::new(randn(&mut rng, bsz * K * NODE_DIM), [bsz, K, NODE_DIM]),
-            &device,
-        );
-        let eps_e = Tensor::<3>::from_data(
-            TensorData::new(
-                randn(&mut rng, bsz * NUM_EDGES * EDGE_DIM),
-                [bsz, NUM_EDGES, EDGE_DIM],
-            ),
-            &device,
-        );
+        let (eps_v, eps_e) = graph_noise(&mut rng, bsz, &device);
         let (sa, sb): (Vec<f32>, Vec<f32>) = ts
             .iter()
             .map(|&t| {
@@ -511,12 +518,7 @@ pub fn train_diffusion(
             )
         });
         let (pv, pe) = model.forward(vt, et, t, category);
-        let loss = match weights {
-            None => grouped_loss(pv, pe, eps_v, eps_e),
-            Some(w) => (grouped_loss_per_sample(pv, pe, eps_v, eps_e) * w)
-                .mean()
-                .clamp(-100.0, 100.0),
-        };
+        let loss = grouped_loss(pv, pe, eps_v, eps_e, weights);
         let value: f64 = loss
             .clone()
             .into_data()

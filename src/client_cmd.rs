@@ -92,6 +92,10 @@ pub struct SubmitArgs {
     /// 0: plain conditioning).
     #[arg(long, env = "PHYSNAP_CATEGORY_GUIDANCE")]
     category_guidance: Option<f64>,
+    /// Apply the category guidance only in steps with diffusion time t below this, 1-1000
+    /// (server default: 1000, every step, for a scan-guided job; 500 without loss guidance).
+    #[arg(long, env = "PHYSNAP_CATEGORY_GUIDANCE_BELOW")]
+    category_guidance_below: Option<u32>,
     /// Joint motions of the result: screw (NAP: both ranges kept) or dominant (each joint
     /// keeps only its wider range); server default when unset.
     #[arg(long, env = "PHYSNAP_JOINT_MOTION", value_parser = ["screw", "dominant"])]
@@ -175,6 +179,7 @@ pub fn submit(a: SubmitArgs) -> anyhow::Result<()> {
             steps: a.steps,
             retrieval: a.retrieval.clone().unwrap_or_default(),
             category_guidance: a.category_guidance,
+            category_guidance_below: a.category_guidance_below,
             joint_motion: a.joint_motion.clone().unwrap_or_default(),
             ..Default::default()
         };

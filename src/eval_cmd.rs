@@ -319,6 +319,7 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
                 samples: a.per_category,
                 category: Some(idx),
                 category_guidance: a.category.category_guidance,
+                category_guidance_below: Some(a.category.below(false)),
                 ..base.clone()
             };
             for g in sample_set(&models, req, &pb)? {
@@ -486,10 +487,11 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
             100.0 * acc
         );
         println!(
-            "  valid conditioned samples: {}/{} (category guidance w = {})",
+            "  valid conditioned samples: {}/{} (category guidance w = {} at t < {})",
             cond_valid.len(),
             cond.len(),
-            a.category.category_guidance
+            a.category.category_guidance,
+            a.category.below(false)
         );
         for e in &per_cat {
             let misses: Vec<String> = e
@@ -530,6 +532,7 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
         "steps": steps_run,
         "eta": a.eta,
         "category_guidance": a.category.category_guidance,
+        "category_guidance_below": a.category.below(false),
         "unconditional": {
             "retrieved_samples": retrieved_samples,
             "retrieved_parts": retrieved_parts,

@@ -467,6 +467,20 @@ struct CategoryGuidanceArgs {
     /// ε̂ = ε̂(c) + w·(ε̂(c) − ε̂(∅)) (0: plain conditioning; > 0 doubles the denoiser's work).
     #[arg(long, env = "PHYSNAP_CATEGORY_GUIDANCE", default_value_t = physnap::engine::sample::DEFAULT_CATEGORY_GUIDANCE)]
     category_guidance: f64,
+    /// Apply the category guidance only in steps with diffusion time t below this, 1-1000;
+    /// above it the plain conditional prediction is used (one forward). Default: 500 without
+    /// loss guidance, 1000 (every step) when a scan guides the sample.
+    #[arg(long, env = "PHYSNAP_CATEGORY_GUIDANCE_BELOW")]
+    category_guidance_below: Option<usize>,
+}
+
+impl CategoryGuidanceArgs {
+    /// `--category-guidance-below`, or its default for a sample with or without loss guidance.
+    fn below(&self, loss_guided: bool) -> usize {
+        self.category_guidance_below.unwrap_or_else(|| {
+            physnap::engine::sample::default_category_guidance_below(loss_guided)
+        })
+    }
 }
 
 /// Sampler and guidance-schedule flags shared by `generate` and `eval guided`.

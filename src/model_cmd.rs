@@ -348,6 +348,11 @@ pub fn generate(a: GenerateArgs) -> anyhow::Result<()> {
         steps: a.sampling.steps,
         retrieval: retrieval_mode(&a.sampling.retrieval, &models)?,
         category_guidance: a.sampling.category.category_guidance,
+        category_guidance_below: Some(
+            a.sampling
+                .category
+                .below(guidance.as_ref().is_some_and(|g| g.is_active())),
+        ),
         joint_motion: joint_motion(&a.sampling.joint_motion)?,
         ..Default::default()
     };
@@ -667,6 +672,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         },
         retrieval: retrieval_mode(&a.sampling.retrieval, &models)?,
         category_guidance: a.sampling.category.category_guidance,
+        category_guidance_below: a.sampling.category.category_guidance_below,
         joint_motion: joint_motion(&a.sampling.joint_motion)?,
     };
     opts.id.validate()?;
@@ -754,6 +760,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         "guidance_max_step": opts.max_step, "guidance_refine_steps": opts.refine_steps,
         "sampler": a.sampling.sampler, "steps": a.sampling.steps, "eta": a.sampling.eta,
         "category_guidance": a.sampling.category.category_guidance,
+        "category_guidance_below": a.sampling.category.category_guidance_below,
         "retrieval": opts.retrieval.as_str(), "joint_motion": a.sampling.joint_motion,
         "statistic": "E_* and D_pc: median over all samples; MMD and 1-NNA: per cloud (its samples vs its references), median over clouds",
         "references": a.data.as_ref().map(|d| serde_json::json!({

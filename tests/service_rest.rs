@@ -768,6 +768,8 @@ async fn guided_ddim_job_streams_losses_and_ranks_best_of_n() {
     assert_eq!(req["retrieval"], "off", "{req}");
     // No category: no category guidance.
     assert_eq!(req["category_guidance"].as_f64(), Some(0.0), "{req}");
+    // A scan-guided job is category-guided in every step by default (echoed as run).
+    assert_eq!(req["category_guidance_below"].as_u64(), Some(1000), "{req}");
     // The default joint motion: one per joint.
     assert_eq!(req["joint_motion"], "dominant", "{req}");
     // Unset weights follow the paper's rule: w_pen = w_mob = 2 / 3.
@@ -901,6 +903,16 @@ async fn guidance_and_sampler_fields_are_validated() {
         ),
         // Category guidance needs a category to extrapolate from.
         (json!({"category_guidance": 2.0}), "category_guidance", "2"),
+        (
+            json!({"category_guidance_below": 0}),
+            "category_guidance_below",
+            "0",
+        ),
+        (
+            json!({"category_guidance_below": 1001}),
+            "category_guidance_below",
+            "1001",
+        ),
     ];
     for (extra, field, value) in cases {
         let mut b = json!({"points": points_json(32)});

@@ -148,6 +148,8 @@ pub struct GenerateRequest {
     pub retrieval: Retrieval,
     /// Classifier-free category guidance weight; see [`SampleRequest::category_guidance`].
     pub category_guidance: f64,
+    /// Steps where the category guidance applies; see [`SampleRequest::category_guidance_below`].
+    pub category_guidance_below: Option<usize>,
     /// How many motions each joint keeps.
     pub joint_motion: JointMotion,
 }
@@ -268,6 +270,7 @@ pub fn generate_with(
                 sampler: req.sampler,
                 steps: req.steps,
                 category_guidance: req.category_guidance,
+                category_guidance_below: req.category_guidance_below,
             },
             shapes.field.map(|field| GuidanceContext { field, scales }),
             &device,

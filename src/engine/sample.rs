@@ -58,6 +58,23 @@ const MOB_STREAM: u64 = 0x4755_4944_414e_4345;
 /// "Category guidance").
 pub const DEFAULT_CATEGORY_GUIDANCE: f64 = 2.0;
 
+/// Without loss guidance, category guidance is applied by default only in the steps with
+/// diffusion time t below this ([`SampleRequest::category_guidance_below`]): above it the
+/// guidance buys no category accuracy, only larger objects with more parts, and costs a second
+/// forward per step (EVALUATION.md, "Category guidance only at t < 500").
+pub const UNGUIDED_CATEGORY_GUIDANCE_BELOW: usize = 500;
+
+/// The CLI's and the service's default for [`SampleRequest::category_guidance_below`]:
+/// [`UNGUIDED_CATEGORY_GUIDANCE_BELOW`] for plain sampling, every step when loss guidance pulls
+/// the sample to a scan (there the limit aligned worse; EVALUATION.md).
+pub fn default_category_guidance_below(loss_guided: bool) -> usize {
+    if loss_guided {
+        crate::engine::schedule::NUM_STEPS
+    } else {
+        UNGUIDED_CATEGORY_GUIDANCE_BELOW
+    }
+}
+
 /// Largest accepted [`SampleRequest::category_guidance`].
 pub const MAX_CATEGORY_GUIDANCE: f64 = 20.0;
 
@@ -86,6 +103,9 @@ pub struct SampleRequest {
     /// second forward (batched with the first). Ignored without a category or for an
     /// unconditional model.
     pub category_guidance: f64,
+    /// Apply the category guidance only in steps with diffusion time t below this (the other
+    /// steps use the plain conditional prediction, one forward); None: in every step.
+    pub category_guidance_below: Option<usize>,
 }
 
 /// Reported after every reverse step.
@@ -186,6 +206,15 @@ pub fn sample_guided(
             value: req.category_guidance.to_string(),
         });
     }
+    if let Some(below) = req.category_guidance_below
+        && !(1..=schedule.len()).contains(&below)
+    {
+        return Err(EngineError::Invalid {
+            field: "category_guidance_below".into(),
+            limit: format!("in [1, {}]", schedule.len()),
+            value: below.to_string(),
+        });
+    }
     if req.steps > schedule.len() {
         return Err(EngineError::Invalid {
             field: "steps".into(),
@@ -248,8 +277,9 @@ pub fn sample_guided(
                 req.category_guidance as f32,
             )
         });
+    let guide_below = req.category_guidance_below.unwrap_or(usize::MAX);
     let predict = |v: Tensor<3>, e: Tensor<3>, t: usize| -> (Tensor<3>, Tensor<3>) {
-        match &cfg {
+        match cfg.as_ref().filter(|_| t < guide_below) {
             None => {
                 let tt =
                     Tensor::<1, Int>::from_data(TensorData::new(vec![t as i64; b], [b]), device);
@@ -600,6 +630,45 @@ mod tests {
             e.contains("category_guidance") && e.contains("[0, 20]") && e.contains("-1"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn category_guidance_applies_only_below_its_time_limit() {
+        // The single DDIM jump runs at t = 999: a limit at or below it leaves the plain
+        // conditional prediction, a limit above it (1000, the whole schedule) guides.
+        let model = tiny();
+        let dev = crate::model::cpu();
+        let run = |w: f64, below: Option<usize>| {
+            let req = SampleRequest {
+                seed: 4,
+                batch: 1,
+                category: Some(1),
+                sampler: Sampler::Ddim { eta: 0.0 },
+                steps: 1,
+                category_guidance: w,
+                category_guidance_below: below,
+                ..Default::default()
+            };
+            sample(&model, &Schedule::default(), &req, &dev, &mut |_| {
+                ControlFlow::Continue(())
+            })
+            .map(|gs| gs.iter().flat_map(|g| g.flatten()).collect::<Vec<f32>>())
+        };
+        let plain = run(0.0, None).unwrap();
+        let guided = run(2.0, None).unwrap();
+        assert_ne!(plain, guided);
+        assert_eq!(run(2.0, Some(999)).unwrap(), plain);
+        assert_eq!(run(2.0, Some(500)).unwrap(), plain);
+        assert_eq!(run(2.0, Some(1000)).unwrap(), guided);
+        for bad in [0, 1001] {
+            let e = run(2.0, Some(bad)).unwrap_err().to_string();
+            assert!(
+                e.contains("category_guidance_below")
+                    && e.contains("[1, 1000]")
+                    && e.contains(&bad.to_string()),
+                "{e}"
+            );
+        }
     }
 
     #[test]

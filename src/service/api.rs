@@ -101,6 +101,13 @@ pub struct JobRequest {
     /// ε̂ = ε̂(c) + w·(ε̂(c) − ε̂(∅)). Default 2 with a category; 0 = plain conditioning.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub category_guidance: Option<f64>,
+    /// Apply the category guidance only in reverse steps with diffusion time t below this,
+    /// 1-1000; 1000 = every step, the default for a scan-guided job. Default 500 without loss
+    /// guidance (all weights 0): above t = 500 the guidance bought no category accuracy there,
+    /// only larger objects with more parts, and those steps take one denoiser forward instead
+    /// of two.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub category_guidance_below: Option<u32>,
     /// Joint motions of the result: `screw` (NAP: each joint keeps its rotation and
     /// translation ranges; URDF screws need a helper link) or `dominant` (each joint keeps only
     /// the wider range, in units of the model's feature scales: plain revolute and prismatic
@@ -151,6 +158,8 @@ pub struct UploadParams {
     pub retrieval: Option<String>,
     /// Classifier-free category guidance w.
     pub category_guidance: Option<f64>,
+    /// Category guidance only at diffusion time t below this (1-1000).
+    pub category_guidance_below: Option<u32>,
     /// Joint motions (`screw`, `dominant`).
     pub joint_motion: Option<String>,
 }
@@ -208,6 +217,7 @@ impl JobRequest {
             resolution: self.resolution,
             retrieval: self.retrieval,
             category_guidance: self.category_guidance,
+            category_guidance_below: self.category_guidance_below,
             joint_motion: self.joint_motion,
         })
     }
@@ -236,6 +246,7 @@ impl UploadParams {
             resolution: self.resolution,
             retrieval: self.retrieval,
             category_guidance: self.category_guidance,
+            category_guidance_below: self.category_guidance_below,
             joint_motion: self.joint_motion,
         }
     }
@@ -282,6 +293,8 @@ pub struct RequestView {
     pub retrieval: String,
     /// Classifier-free category guidance w as run (0 without a category).
     pub category_guidance: f64,
+    /// The category guidance applied at diffusion time t below this (1000: every step).
+    pub category_guidance_below: u32,
     /// Joint motions as run: `screw` or `dominant`.
     pub joint_motion: String,
     /// Whether guidance is applied (some weight > 0); false = plain NAP sampling.
@@ -501,6 +514,7 @@ pub fn request_view(s: &JobSpec) -> RequestView {
         resolution: s.resolution,
         retrieval: s.retrieval.clone(),
         category_guidance: s.category_guidance,
+        category_guidance_below: s.category_guidance_below,
         joint_motion: s.joint_motion.clone(),
         guided: s.guided(),
     }

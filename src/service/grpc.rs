@@ -150,6 +150,7 @@ pub fn input_of(spec: pb::JobSpec) -> JobInput {
         resolution: spec.resolution,
         retrieval: Some(spec.retrieval).filter(|s| !s.is_empty()),
         category_guidance: spec.category_guidance,
+        category_guidance_below: spec.category_guidance_below,
         joint_motion: Some(spec.joint_motion).filter(|s| !s.is_empty()),
     }
 }

@@ -242,6 +242,7 @@ fn ranking_json(spec: &JobSpec, guidance: &Option<GuidanceOptions>, rows: &[Rank
         "sampler": spec.sampler, "eta": spec.eta, "steps": spec.steps,
         "retrieval": spec.retrieval,
         "category_guidance": spec.category_guidance,
+        "category_guidance_below": spec.category_guidance_below,
         "joint_motion": spec.joint_motion,
         "best": best,
         "samples": rows.iter().enumerate().map(|(rank, r)| serde_json::json!({
@@ -284,6 +285,7 @@ pub fn run_job(
         steps: spec.steps as usize,
         retrieval: spec.engine_retrieval(),
         category_guidance: spec.category_guidance,
+        category_guidance_below: Some(spec.category_guidance_below as usize),
         joint_motion: spec.engine_joint_motion(),
     };
     let decoder = LatentSdfDecoder::new(&m.shape_prior.decoder);

@@ -14,8 +14,11 @@ use crate::engine::guidance::{
     MAX_REFINE_STEPS, Terms,
 };
 use crate::engine::sample::Sampler;
-use crate::engine::sample::{DEFAULT_CATEGORY_GUIDANCE, DEFAULT_STEPS, MAX_CATEGORY_GUIDANCE};
-use crate::engine::schedule::timesteps;
+use crate::engine::sample::{
+    DEFAULT_CATEGORY_GUIDANCE, DEFAULT_STEPS, MAX_CATEGORY_GUIDANCE,
+    default_category_guidance_below,
+};
+use crate::engine::schedule::{NUM_STEPS, timesteps};
 use crate::pointcloud::{Format, Limits as CloudLimits, PointCloud, PointCloudError};
 
 /// The raw point-cloud payload, as it arrived.
@@ -74,6 +77,8 @@ pub struct JobInput {
     pub retrieval: Option<String>,
     /// Classifier-free category guidance w (with a category only).
     pub category_guidance: Option<f64>,
+    /// Apply the category guidance only in steps with diffusion time t below this (1-1000).
+    pub category_guidance_below: Option<u32>,
     /// Joint motions of the result: `screw` or `dominant` (see [`JobSpec::joint_motion`]).
     pub joint_motion: Option<String>,
 }
@@ -181,6 +186,9 @@ pub struct JobSpec {
     pub retrieval: String,
     /// Classifier-free category guidance w (0 without a category).
     pub category_guidance: f64,
+    /// The guidance applies in steps with diffusion time t below this (1000: every step;
+    /// default 1000 for a guided job, 500 for plain sampling).
+    pub category_guidance_below: u32,
     /// `screw` (NAP: each joint keeps its rotation and translation ranges) or `dominant` (each
     /// joint keeps only the wider one, so exported joints are plain revolute / prismatic).
     pub joint_motion: String,
@@ -593,6 +601,17 @@ pub fn validate(
         (Some(w), Some(_)) => w,
         (None, Some(_)) => DEFAULT_CATEGORY_GUIDANCE,
     };
+    let loss_guided = w_pc > 0.0 || w_pen > 0.0 || w_mob > 0.0;
+    let category_guidance_below = input
+        .category_guidance_below
+        .unwrap_or(default_category_guidance_below(loss_guided) as u32);
+    if !(1..=NUM_STEPS as u32).contains(&category_guidance_below) {
+        return Err(violation(
+            "category_guidance_below",
+            format!("in [1, {NUM_STEPS}]"),
+            category_guidance_below,
+        ));
+    }
     Ok(JobSpec {
         points,
         category,
@@ -613,6 +632,7 @@ pub fn validate(
         resolution,
         retrieval,
         category_guidance,
+        category_guidance_below,
         joint_motion,
     })
 }
@@ -653,6 +673,26 @@ mod tests {
         assert_eq!(run(Some("Door"), None), DEFAULT_CATEGORY_GUIDANCE);
         assert_eq!(run(Some("Door"), Some(0.0)), 0.0);
         assert_eq!(run(Some("Door"), Some(4.5)), 4.5);
+        // A scan-guided job is category-guided in every step by default, plain sampling only
+        // below t = 500; either can be asked for.
+        let below = |b: Option<u32>, w_pc: f64| {
+            let input = JobInput {
+                points: Some(cloud(16)),
+                category: Some("Door".into()),
+                category_guidance_below: b,
+                w_pc: Some(w_pc),
+                w_pen: Some(0.0),
+                w_mob: Some(0.0),
+                ..Default::default()
+            };
+            validate(&input, &caps(), &Limits::default(), 1)
+                .unwrap()
+                .category_guidance_below
+        };
+        assert_eq!(below(None, 1.0), 1000);
+        assert_eq!(below(None, 0.0), 500);
+        assert_eq!(below(Some(500), 1.0), 500);
+        assert_eq!(below(Some(1), 0.0), 1);
     }
 
     #[test]
@@ -899,6 +939,17 @@ mod tests {
             (v.field.as_str(), v.limit.as_str(), v.value.as_str()),
             ("category_guidance", "0 or absent without a category", "3")
         );
+        for b in [0, 1001] {
+            let v = bad(&|i| i.category_guidance_below = Some(b));
+            assert_eq!(
+                (v.field.as_str(), v.limit.as_str(), v.value.as_str()),
+                (
+                    "category_guidance_below",
+                    "in [1, 1000]",
+                    b.to_string().as_str()
+                )
+            );
+        }
         let v = bad(&|i| i.retrieval = Some("nearest".into()));
         assert_eq!(
             (v.field.as_str(), v.value.as_str()),

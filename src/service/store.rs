@@ -180,6 +180,9 @@ struct SpecDoc {
     /// Rows written before category guidance existed ran without it.
     #[serde(default)]
     category_guidance: f64,
+    /// Rows written before the guidance could be limited to t < 500 guided every step.
+    #[serde(default = "every_step")]
+    category_guidance_below: u32,
     /// Rows written before joint motions could be chosen kept NAP's screws.
     #[serde(default = "joint_motion_screw")]
     joint_motion: String,
@@ -187,6 +190,10 @@ struct SpecDoc {
 
 fn joint_motion_screw() -> String {
     crate::engine::generate::JointMotion::Screw.as_str().into()
+}
+
+fn every_step() -> u32 {
+    crate::engine::schedule::NUM_STEPS as u32
 }
 
 fn retrieval_off() -> String {
@@ -213,6 +220,7 @@ fn spec_to_row(s: &JobSpec) -> (String, Vec<u8>) {
         resolution: s.resolution,
         retrieval: s.retrieval.clone(),
         category_guidance: s.category_guidance,
+        category_guidance_below: s.category_guidance_below,
         joint_motion: s.joint_motion.clone(),
     };
     let mut blob = Vec::with_capacity(s.points.len() * 12);
@@ -258,6 +266,7 @@ fn spec_from_row(id: &str, json: &str, blob: &[u8]) -> Result<JobSpec, StoreErro
         resolution: d.resolution,
         retrieval: d.retrieval,
         category_guidance: d.category_guidance,
+        category_guidance_below: d.category_guidance_below,
         joint_motion: d.joint_motion,
     })
 }
@@ -530,4 +539,33 @@ fn append_events(
         )?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rows_stored_before_newer_options_keep_the_behaviour_they_were_accepted_with() {
+        // A spec row as the first service release wrote it (no retrieval, category guidance,
+        // guidance limit or joint motion): it still runs, as it was accepted.
+        let json = r#"{"category":[1,"Door"],"w_pc":1.0,"w_pen":1.0,"w_mob":1.0,"n_g":200,
+            "tau":0.1,"sampler":"ddim","steps":200,"seed":7,"samples":1,
+            "deadline_seconds":600.0,"preview_every":0,"resolution":32}"#;
+        let spec = spec_from_row("j", json, &[0u8; 24]).unwrap();
+        assert_eq!(spec.points.len(), 2);
+        assert_eq!(spec.retrieval, "off");
+        assert_eq!(spec.category_guidance, 0.0);
+        assert_eq!(spec.category_guidance_below, 1000);
+        assert_eq!(spec.joint_motion, "screw");
+        // And a spec round-trips through its row unchanged.
+        let (json, blob) = spec_to_row(&spec);
+        let back = spec_from_row("j", &json, &blob).unwrap();
+        assert_eq!(back.category_guidance_below, 1000);
+        assert_eq!(back.seed, 7);
+        let corrupt = spec_from_row("j", &json, &[0u8; 5])
+            .unwrap_err()
+            .to_string();
+        assert!(corrupt.contains("5 bytes"), "{corrupt}");
+    }
 }

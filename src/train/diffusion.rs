@@ -274,8 +274,11 @@ pub fn load_split(data: &Path, shape: &Path, split: &str) -> Result<DiffusionDat
     })
 }
 
-/// NAP's grouped loss on (prediction, target) pairs, per sample, each times its weight
-/// (`[B]`; None: all 1), averaged over the batch and clamped.
+/// NAP's grouped loss on (prediction, target) pairs: without weights, the batch mean clamped
+/// to [−100, 100] as NAP does (a guard: beyond it the gradient is zero). With per-sample
+/// weights (`[B]`), the guard clamps each sample's unweighted loss and the weighted losses are
+/// averaged, so a large weight cannot push the mean into the clamp and zero the gradient of
+/// the whole batch (the first `--high-noise-cap 100` run lost its training that way).
 pub fn grouped_loss(
     pred_v: Tensor<3>,
     pred_e: Tensor<3>,
@@ -285,11 +288,9 @@ pub fn grouped_loss(
 ) -> Tensor<1> {
     let per_sample = grouped_loss_per_sample(pred_v, pred_e, eps_v, eps_e);
     match weights {
-        Some(w) => per_sample * w,
-        None => per_sample,
+        Some(w) => (per_sample.clamp(-100.0, 100.0) * w).mean(),
+        None => per_sample.mean().clamp(-100.0, 100.0),
     }
-    .mean()
-    .clamp(-100.0, 100.0)
 }
 
 /// NAP's grouped loss of each sample of the batch, `[B]` (not clamped).
@@ -802,6 +803,42 @@ mod tests {
         assert_eq!(both.loss_weight(a, b), 100.0);
         let (a, b) = schedule.noise_coefficients(5);
         assert!(both.loss_weight(a, b) < 0.1);
+    }
+
+    #[test]
+    fn loss_weights_cannot_clamp_the_gradient_away() {
+        // ε = 1 against a zero prediction: every group's mean square is 1, so each sample's
+        // grouped loss is 4 (the node groups' mean plus three edge groups).
+        let dev = crate::model::cpu_autodiff();
+        let b = 2;
+        let run = |eps: f32, w: Option<f32>| {
+            let pv = Tensor::<3>::zeros([b, K, NODE_DIM], &dev).require_grad();
+            let pe = Tensor::<3>::zeros([b, NUM_EDGES, EDGE_DIM], &dev);
+            let ev = Tensor::<3>::full([b, K, NODE_DIM], eps, &dev);
+            let ee = Tensor::<3>::full([b, NUM_EDGES, EDGE_DIM], eps, &dev);
+            let weights = w.map(|w| Tensor::<1>::full([b], w, &dev));
+            let loss = grouped_loss(pv.clone(), pe, ev, ee, weights);
+            let value = loss.clone().into_scalar::<f32>();
+            let grads = loss.backward();
+            let g = pv.grad(&grads).map(|g| g.abs().sum().into_scalar::<f32>());
+            (value, g.unwrap_or(0.0))
+        };
+        let (plain, g_plain) = run(1.0, None);
+        assert!(
+            (plain - 4.0).abs() < 1e-4 && g_plain > 0.0,
+            "{plain} {g_plain}"
+        );
+        // Weight 100: the weighted mean is 400 and still has a gradient (clamping the mean,
+        // NAP's guard, would give 100 and none).
+        let (weighted, g_weighted) = run(1.0, Some(100.0));
+        assert!((weighted - 400.0).abs() < 1e-2, "{weighted}");
+        assert!(g_weighted > 50.0 * g_plain, "{g_weighted} vs {g_plain}");
+        // The guard still holds per sample: a loss of 10⁴ counts as 100 (times its weight).
+        let (huge, _) = run(50.0, Some(2.0));
+        assert!((huge - 200.0).abs() < 1e-2, "{huge}");
+        // Unweighted, NAP's clamp of the mean is unchanged.
+        let (huge_plain, g_huge) = run(50.0, None);
+        assert_eq!((huge_plain, g_huge), (100.0, 0.0));
     }
 
     #[test]

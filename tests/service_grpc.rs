@@ -174,6 +174,22 @@ async fn submit_watch_get_artifact() {
         .unwrap_err();
     assert_eq!(e.code(), tonic::Code::InvalidArgument);
     assert_eq!(e.metadata().get("physnap-field").unwrap(), "joint_motion");
+    // So does category_guidance_below.
+    let mut below = spec(flat.clone());
+    below.category_guidance_below = Some(1001);
+    let e = cl
+        .submit_job(pb::SubmitJobRequest {
+            spec: Some(below),
+            request_id: String::new(),
+        })
+        .await
+        .unwrap_err();
+    assert_eq!(e.code(), tonic::Code::InvalidArgument);
+    assert_eq!(
+        e.metadata().get("physnap-field").unwrap(),
+        "category_guidance_below"
+    );
+    assert!(e.message().contains("1001"), "{}", e.message());
     let mut cat = spec(flat.clone());
     cat.category = "Spaceship".into();
     let e = cl
@@ -336,6 +352,8 @@ async fn cli_submit_watch_downloads_verified_artifacts() {
     let job = s.svc.get("local", &id).await.unwrap();
     assert_eq!(job.state, "SUCCEEDED");
     assert_eq!(job.request.category.as_deref(), Some("Door"));
+    // A scan-guided job is category-guided in every step unless asked otherwise.
+    assert_eq!(job.request.category_guidance_below, 1000);
     for a in &job.artifacts {
         let bytes = std::fs::read(out.join(&a.name)).unwrap();
         assert_eq!(

@@ -248,6 +248,8 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
         .collect::<Result<_, _>>()?;
 
     let conditional = a.per_category > 0 && models.manifest.denoiser.config.categories > 0;
+    // The conditioned samples here are never loss-guided.
+    let guidance_below = a.category.below(false);
     // Category accuracy searches its own reference set: the whole test split by default.
     let same_refs = conditional && a.category_refs == a.refs;
     let cat_refs = if !conditional {
@@ -319,7 +321,7 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
                 samples: a.per_category,
                 category: Some(idx),
                 category_guidance: a.category.category_guidance,
-                category_guidance_below: Some(a.category.below(false)),
+                category_guidance_below: Some(guidance_below),
                 ..base.clone()
             };
             for g in sample_set(&models, req, &pb)? {
@@ -491,7 +493,7 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
             cond_valid.len(),
             cond.len(),
             a.category.category_guidance,
-            a.category.below(false)
+            guidance_below
         );
         for e in &per_cat {
             let misses: Vec<String> = e
@@ -532,7 +534,7 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
         "steps": steps_run,
         "eta": a.eta,
         "category_guidance": a.category.category_guidance,
-        "category_guidance_below": a.category.below(false),
+        "category_guidance_below": guidance_below,
         "unconditional": {
             "retrieved_samples": retrieved_samples,
             "retrieved_parts": retrieved_parts,

@@ -25,6 +25,19 @@ fn spec(points: Vec<f32>) -> pb::JobSpec {
     }
 }
 
+/// Submits `spec` and returns the error the server must answer with.
+async fn refused(
+    cl: &mut JobServiceClient<tonic::transport::Channel>,
+    spec: pb::JobSpec,
+) -> tonic::Status {
+    cl.submit_job(pb::SubmitJobRequest {
+        spec: Some(spec),
+        request_id: String::new(),
+    })
+    .await
+    .unwrap_err()
+}
+
 async fn watch(
     cl: &mut JobServiceClient<tonic::transport::Channel>,
     id: &str,
@@ -136,26 +149,14 @@ async fn submit_watch_get_artifact() {
     // Bad input: INVALID_ARGUMENT naming field, limit and value; nothing stored.
     let mut bad = flat.clone();
     bad[7] = f32::NAN;
-    let e = cl
-        .submit_job(pb::SubmitJobRequest {
-            spec: Some(spec(bad)),
-            request_id: String::new(),
-        })
-        .await
-        .unwrap_err();
+    let e = refused(&mut cl, spec(bad)).await;
     assert_eq!(e.code(), tonic::Code::InvalidArgument);
     assert!(e.message().contains("points[2][1]"), "{}", e.message());
     assert_eq!(e.metadata().get("physnap-field").unwrap(), "points[2][1]");
     assert_eq!(e.metadata().get("physnap-limit").unwrap(), "finite");
     let mut neg = spec(flat.clone());
     neg.w_mob = Some(-1.0);
-    let e = cl
-        .submit_job(pb::SubmitJobRequest {
-            spec: Some(neg),
-            request_id: String::new(),
-        })
-        .await
-        .unwrap_err();
+    let e = refused(&mut cl, neg).await;
     assert_eq!(e.code(), tonic::Code::InvalidArgument);
     assert!(
         e.message().contains("w_mob") && e.message().contains("-1"),
@@ -165,25 +166,13 @@ async fn submit_watch_get_artifact() {
     // joint_motion reaches the same validation as REST.
     let mut motion = spec(flat.clone());
     motion.joint_motion = "revolute".into();
-    let e = cl
-        .submit_job(pb::SubmitJobRequest {
-            spec: Some(motion),
-            request_id: String::new(),
-        })
-        .await
-        .unwrap_err();
+    let e = refused(&mut cl, motion).await;
     assert_eq!(e.code(), tonic::Code::InvalidArgument);
     assert_eq!(e.metadata().get("physnap-field").unwrap(), "joint_motion");
     // So does category_guidance_below.
     let mut below = spec(flat.clone());
     below.category_guidance_below = Some(1001);
-    let e = cl
-        .submit_job(pb::SubmitJobRequest {
-            spec: Some(below),
-            request_id: String::new(),
-        })
-        .await
-        .unwrap_err();
+    let e = refused(&mut cl, below).await;
     assert_eq!(e.code(), tonic::Code::InvalidArgument);
     assert_eq!(
         e.metadata().get("physnap-field").unwrap(),
@@ -192,24 +181,16 @@ async fn submit_watch_get_artifact() {
     assert!(e.message().contains("1001"), "{}", e.message());
     let mut cat = spec(flat.clone());
     cat.category = "Spaceship".into();
-    let e = cl
-        .submit_job(pb::SubmitJobRequest {
-            spec: Some(cat),
-            request_id: String::new(),
-        })
-        .await
-        .unwrap_err();
+    let e = refused(&mut cl, cat).await;
     assert_eq!(e.code(), tonic::Code::InvalidArgument);
-    let e = cl
-        .submit_job(pb::SubmitJobRequest {
-            spec: Some(pb::JobSpec {
-                points: Some(pb::job_spec::Points::Ply(b"ply\ngarbage".to_vec())),
-                ..Default::default()
-            }),
-            request_id: String::new(),
-        })
-        .await
-        .unwrap_err();
+    let e = refused(
+        &mut cl,
+        pb::JobSpec {
+            points: Some(pb::job_spec::Points::Ply(b"ply\ngarbage".to_vec())),
+            ..Default::default()
+        },
+    )
+    .await;
     assert_eq!(e.code(), tonic::Code::InvalidArgument);
     let list = cl
         .list_jobs(pb::ListJobsRequest::default())

@@ -194,13 +194,18 @@ pub struct JobSpec {
     pub joint_motion: String,
 }
 
+/// Whether loss weights guide the sample (some weight > 0); false = plain NAP sampling.
+fn loss_guided(w_pc: f64, w_pen: f64, w_mob: f64) -> bool {
+    w_pc > 0.0 || w_pen > 0.0 || w_mob > 0.0
+}
+
 /// Largest τ accepted (the engine's limit).
 pub const MAX_TAU: f64 = 1e9;
 
 impl JobSpec {
     /// Whether any guidance weight is positive (otherwise the job samples unguided).
     pub fn guided(&self) -> bool {
-        self.w_pc > 0.0 || self.w_pen > 0.0 || self.w_mob > 0.0
+        loss_guided(self.w_pc, self.w_pen, self.w_mob)
     }
 
     /// The engine's joint motion (an unknown name, impossible after [`validate`], is NAP's).
@@ -601,10 +606,9 @@ pub fn validate(
         (Some(w), Some(_)) => w,
         (None, Some(_)) => DEFAULT_CATEGORY_GUIDANCE,
     };
-    let loss_guided = w_pc > 0.0 || w_pen > 0.0 || w_mob > 0.0;
     let category_guidance_below = input
         .category_guidance_below
-        .unwrap_or(default_category_guidance_below(loss_guided) as u32);
+        .unwrap_or(default_category_guidance_below(loss_guided(w_pc, w_pen, w_mob)) as u32);
     if !(1..=NUM_STEPS as u32).contains(&category_guidance_below) {
         return Err(violation(
             "category_guidance_below",

@@ -477,9 +477,7 @@ struct CategoryGuidanceArgs {
 impl CategoryGuidanceArgs {
     /// `--category-guidance-below`, or its default for a sample with or without loss guidance.
     fn below(&self, loss_guided: bool) -> usize {
-        self.category_guidance_below.unwrap_or_else(|| {
-            physnap::engine::sample::default_category_guidance_below(loss_guided)
-        })
+        physnap::engine::sample::category_guidance_below(self.category_guidance_below, loss_guided)
     }
 }
 

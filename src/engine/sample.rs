@@ -64,15 +64,16 @@ pub const DEFAULT_CATEGORY_GUIDANCE: f64 = 2.0;
 /// forward per step (EVALUATION.md, "Category guidance only at t < 500").
 pub const UNGUIDED_CATEGORY_GUIDANCE_BELOW: usize = 500;
 
-/// The CLI's and the service's default for [`SampleRequest::category_guidance_below`]:
-/// [`UNGUIDED_CATEGORY_GUIDANCE_BELOW`] for plain sampling, every step when loss guidance pulls
-/// the sample to a scan (there the limit aligned worse; EVALUATION.md).
-pub fn default_category_guidance_below(loss_guided: bool) -> usize {
-    if loss_guided {
+/// The [`SampleRequest::category_guidance_below`] the CLI, the evaluations and the service run:
+/// the requested limit, else [`UNGUIDED_CATEGORY_GUIDANCE_BELOW`] for plain sampling and every
+/// step when loss guidance pulls the sample to a scan (there the limit aligned worse;
+/// EVALUATION.md). Not range-checked here: [`sample_guided`] and the service validate it.
+pub fn category_guidance_below(requested: Option<usize>, loss_guided: bool) -> usize {
+    requested.unwrap_or(if loss_guided {
         crate::engine::schedule::NUM_STEPS
     } else {
         UNGUIDED_CATEGORY_GUIDANCE_BELOW
-    }
+    })
 }
 
 /// Largest accepted [`SampleRequest::category_guidance`].

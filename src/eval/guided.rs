@@ -28,7 +28,7 @@ use burn::tensor::{Tensor, TensorData};
 use crate::engine::EngineError;
 use crate::engine::generate::{GenerateRequest, JointMotion, PartShapes, Retrieval, generate_with};
 use crate::engine::guidance::{GuidanceOptions, Terms};
-use crate::engine::sample::{Sampler, default_category_guidance_below};
+use crate::engine::sample::{Sampler, category_guidance_below};
 use crate::engine::schedule::Schedule;
 use crate::graph::FeatureScales;
 use crate::mesh::MeshingOptions;
@@ -270,7 +270,7 @@ pub struct TableOptions {
     /// Classifier-free category guidance of the category-aware rows.
     pub category_guidance: f64,
     /// Steps where it applies, see [`GenerateRequest::category_guidance_below`]; None: each
-    /// row's default ([`default_category_guidance_below`] of whether the row is guided).
+    /// row's default ([`category_guidance_below`] of whether the row is guided).
     pub category_guidance_below: Option<usize>,
     /// How many motions each joint keeps; see [`GenerateRequest::joint_motion`].
     pub joint_motion: JointMotion,
@@ -624,12 +624,9 @@ pub fn run_rows(
                             None => opts.retrieval.without_category(),
                         },
                         category_guidance: opts.category_guidance,
-                        category_guidance_below: Some(opts.category_guidance_below.unwrap_or_else(
-                            || {
-                                default_category_guidance_below(
-                                    guidance.as_ref().is_some_and(|g| g.is_active()),
-                                )
-                            },
+                        category_guidance_below: Some(category_guidance_below(
+                            opts.category_guidance_below,
+                            guidance.as_ref().is_some_and(|g| g.is_active()),
                         )),
                         joint_motion: opts.joint_motion,
                         ..Default::default()

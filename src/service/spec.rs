@@ -15,8 +15,7 @@ use crate::engine::guidance::{
 };
 use crate::engine::sample::Sampler;
 use crate::engine::sample::{
-    DEFAULT_CATEGORY_GUIDANCE, DEFAULT_STEPS, MAX_CATEGORY_GUIDANCE,
-    default_category_guidance_below,
+    DEFAULT_CATEGORY_GUIDANCE, DEFAULT_STEPS, MAX_CATEGORY_GUIDANCE, category_guidance_below,
 };
 use crate::engine::schedule::{NUM_STEPS, timesteps};
 use crate::pointcloud::{Format, Limits as CloudLimits, PointCloud, PointCloudError};
@@ -606,10 +605,11 @@ pub fn validate(
         (Some(w), Some(_)) => w,
         (None, Some(_)) => DEFAULT_CATEGORY_GUIDANCE,
     };
-    let category_guidance_below = input
-        .category_guidance_below
-        .unwrap_or(default_category_guidance_below(loss_guided(w_pc, w_pen, w_mob)) as u32);
-    if !(1..=NUM_STEPS as u32).contains(&category_guidance_below) {
+    let category_guidance_below = category_guidance_below(
+        input.category_guidance_below.map(|b| b as usize),
+        loss_guided(w_pc, w_pen, w_mob),
+    );
+    if !(1..=NUM_STEPS).contains(&category_guidance_below) {
         return Err(violation(
             "category_guidance_below",
             format!("in [1, {NUM_STEPS}]"),
@@ -636,7 +636,8 @@ pub fn validate(
         resolution,
         retrieval,
         category_guidance,
-        category_guidance_below,
+        // In [1, NUM_STEPS], checked above.
+        category_guidance_below: category_guidance_below as u32,
         joint_motion,
     })
 }

@@ -296,9 +296,14 @@ struct ShapeArgs {
     #[arg(long, env = "PHYSNAP_SHAPE_MAX_PARTS")]
     max_parts: Option<usize>,
     /// How the SDF decoder's gradients are computed: `host` (hand-written backward pass on the
-    /// host, the fast default) or `burn` (burn autodiff through every layer, the reference).
-    #[arg(long, env = "PHYSNAP_SHAPE_DECODER_BACKWARD", default_value = "host", value_parser = ["host", "burn"])]
-    decoder_backward: String,
+    /// host, the fast default on the CPU) or `burn` (burn autodiff through every layer, the
+    /// reference; the default with --device gpu).
+    #[arg(long, env = "PHYSNAP_SHAPE_DECODER_BACKWARD", value_parser = ["host", "burn"])]
+    decoder_backward: Option<String>,
+    /// Where the optimiser steps run: `cpu`, or `gpu` / `gpu:N` (Vulkan) in a binary built with
+    /// `--features gpu`.
+    #[arg(long, env = "PHYSNAP_TRAIN_DEVICE", default_value = "cpu")]
+    device: String,
     /// Evaluate val IoU every this many steps (0: only at the end).
     #[arg(long, env = "PHYSNAP_SHAPE_EVAL_EVERY", default_value_t = 1000)]
     eval_every: usize,
@@ -394,7 +399,7 @@ struct DiffusionArgs {
     /// Seed.
     #[arg(long, env = "PHYSNAP_SEED", default_value_t = 12345)]
     seed: u64,
-    /// Steps between checkpoints.
+    /// Steps between checkpoints (0: only the one at the end of the run).
     #[arg(long, env = "PHYSNAP_CHECKPOINT_EVERY", default_value_t = 1000)]
     checkpoint_every: usize,
     /// Step from which the learning rate decays (cosine) to lr × --lr-final-factor.
@@ -420,6 +425,10 @@ struct DiffusionArgs {
     /// high noise up to the cap; 1 = off (NAP).
     #[arg(long, env = "PHYSNAP_DIFFUSION_HIGH_NOISE_CAP", default_value_t = 1.0)]
     high_noise_cap: f64,
+    /// Where the optimiser steps run: `cpu`, or `gpu` / `gpu:N` (Vulkan) in a binary built with
+    /// `--features gpu`.
+    #[arg(long, env = "PHYSNAP_TRAIN_DEVICE", default_value = "cpu")]
+    device: String,
 }
 
 #[derive(Args, Debug)]

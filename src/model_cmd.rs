@@ -19,6 +19,7 @@ use physnap::io::manifest::{
     Entry, LoadedModels, Manifest, load_models, to_string as manifest_to_string,
 };
 use physnap::mesh::MeshingOptions;
+use physnap::model::Compute;
 use physnap::model::denoiser::DenoiserConfig;
 use physnap::model::shape_prior::LatentSdfDecoder;
 use physnap::model::weights::sha256_hex;
@@ -36,6 +37,7 @@ use super::{CodebookArgs, DiffusionArgs, EncodeArgs, EvalGuidedArgs, GenerateArg
 pub fn shape(a: ShapeArgs) -> anyhow::Result<()> {
     let defaults = ShapeTrainConfig::default();
     let m = defaults.model;
+    let compute = Compute::parse("device", &a.device)?;
     let cfg = ShapeTrainConfig {
         model: physnap::model::shape_prior::ShapePriorConfig {
             decoder_hidden: a.decoder_hidden.unwrap_or(m.decoder_hidden),
@@ -62,10 +64,11 @@ pub fn shape(a: ShapeArgs) -> anyhow::Result<()> {
         checkpoint_every: a.checkpoint_every,
         resume: a.resume,
         stop_at: a.stop_at,
-        decoder_backward: match a.decoder_backward.as_str() {
-            "burn" => DecoderBackward::Burn,
+        decoder_backward: match (a.decoder_backward.as_deref(), compute) {
+            (Some("burn"), _) | (None, Compute::Gpu(_)) => DecoderBackward::Burn,
             _ => DecoderBackward::Host,
         },
+        compute,
         ..defaults
     };
     let pb = super::progress_bar(cfg.steps, "shape");
@@ -149,6 +152,7 @@ pub fn encode(a: EncodeArgs) -> anyhow::Result<()> {
 }
 
 pub fn diffusion(a: DiffusionArgs) -> anyhow::Result<()> {
+    let compute = Compute::parse("device", &a.device)?;
     let data = load_data(&a.data, &a.shape)?;
     let model = DenoiserConfig {
         width: a.width,
@@ -170,6 +174,7 @@ pub fn diffusion(a: DiffusionArgs) -> anyhow::Result<()> {
         stop_at: a.stop_at,
         min_snr_gamma: a.min_snr_gamma,
         high_noise_cap: a.high_noise_cap,
+        compute,
         ..DiffusionTrainConfig::default()
     };
     let pb = super::progress_bar(cfg.steps, "diffusion");

@@ -262,6 +262,47 @@ fn negative_progress_interval_names_flag_limit_and_value() {
 }
 
 #[test]
+fn train_device_names_the_flag_the_choices_and_the_value() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let missing = dir.path().join("no-data");
+    let (data, out_s) = (missing.to_str().unwrap(), out.to_str().unwrap());
+    // Checked before any data is read, so a typo costs nothing.
+    let shape = ["train", "shape", "--data", data, "--out", out_s];
+    let o = physnap(&shape, &[("PHYSNAP_TRAIN_DEVICE", "tpu")]);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(
+        e.contains("device") && e.contains("cpu, gpu or gpu:N") && e.contains("tpu"),
+        "{e}"
+    );
+    let diffusion = [
+        "train",
+        "diffusion",
+        "--data",
+        data,
+        "--shape",
+        data,
+        "--out",
+        out_s,
+        "--device",
+        "gpu:0",
+    ];
+    let o = physnap(&diffusion, &[]);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    if cfg!(feature = "gpu") {
+        assert!(e.contains("no-data"), "a GPU build gets to the data: {e}");
+    } else {
+        assert!(
+            e.contains("device") && e.contains("--features gpu") && e.contains("gpu:0"),
+            "{e}"
+        );
+    }
+    assert!(!out.exists(), "nothing is written after a refused flag");
+}
+
+#[test]
 fn eval_guided_refuses_unknown_variants_and_empty_cloud_folders() {
     let dir = tempfile::tempdir().unwrap();
     let clouds = dir.path().join("clouds");

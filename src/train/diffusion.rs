@@ -79,7 +79,7 @@ use crate::graph::{
 };
 use crate::io::npy;
 use crate::model::denoiser::{Denoiser, DenoiserConfig};
-use crate::model::{cpu_autodiff, weights};
+use crate::model::{Compute, weights};
 
 /// Training knobs.
 #[derive(Debug, Clone)]
@@ -98,7 +98,7 @@ pub struct DiffusionTrainConfig {
     pub seed: u64,
     /// Probability of replacing the category by "no category".
     pub category_dropout: f64,
-    /// Steps between checkpoints.
+    /// Steps between checkpoints (0: only the one at the end of the run).
     pub checkpoint_every: usize,
     /// Step from which the learning rate decays (cosine) towards `lr · lr_final_factor`.
     pub lr_decay_start: usize,
@@ -115,6 +115,8 @@ pub struct DiffusionTrainConfig {
     /// Capped truncated-SNR weighting of the high-noise steps: each sample's ε-loss is also
     /// weighted by `clamp(1 / SNR(t), 1, cap)`. 1 (or less) = off (NAP's unweighted loss).
     pub high_noise_cap: f64,
+    /// Where the optimiser steps run.
+    pub compute: Compute,
 }
 
 impl DiffusionTrainConfig {
@@ -167,6 +169,7 @@ impl Default for DiffusionTrainConfig {
             stop_at: None,
             min_snr_gamma: 0.0,
             high_noise_cap: 1.0,
+            compute: Compute::Cpu,
         }
     }
 }
@@ -423,7 +426,7 @@ pub fn train_diffusion(
         }
     }
     std::fs::create_dir_all(out).map_err(|e| data_err(out, e.to_string()))?;
-    let device = cpu_autodiff();
+    let device = cfg.compute.autodiff();
     let schedule = Schedule::default();
     let mut model = Denoiser::new(&cfg.model, &device)?;
     let weights_path = out.join("denoiser.safetensors");
@@ -546,7 +549,7 @@ pub fn train_diffusion(
             loss_ema: ema,
             elapsed: t0.elapsed().as_secs_f64(),
         });
-        if (step + 1) % cfg.checkpoint_every == 0 || step + 1 == end {
+        if (cfg.checkpoint_every > 0 && (step + 1) % cfg.checkpoint_every == 0) || step + 1 == end {
             let ck = match shadow.as_ref() {
                 Some(shadow) => {
                     let raw_sha = weights::save(&model.valid(), &raw_path)?;
@@ -663,7 +666,26 @@ mod tests {
             stop_at: None,
             min_snr_gamma: 0.0,
             high_noise_cap: 1.0,
+            compute: crate::model::Compute::Cpu,
         }
+    }
+
+    #[test]
+    fn checkpoint_every_zero_checkpoints_only_at_the_end() {
+        // Was a division by zero (a panic) before 0 meant "only at the end".
+        let data = tiny_data();
+        let dir = tempfile::tempdir().unwrap();
+        let cfg = DiffusionTrainConfig {
+            checkpoint_every: 0,
+            ..tiny_config(3)
+        };
+        let r = train_diffusion(&data, &cfg, dir.path(), false, &mut |_| {}).unwrap();
+        assert_eq!(r.steps, 3);
+        let ck: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(dir.path().join("checkpoint.json")).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(ck["step"], 3);
     }
 
     #[test]

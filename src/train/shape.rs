@@ -53,7 +53,7 @@ use crate::mesh::DOMAIN_HALF;
 use crate::mesh::bvh::MeshBvh;
 use crate::model::host_decoder::HostDecoder;
 use crate::model::shape_prior::{ShapeDecoder, ShapePrior, ShapePriorConfig};
-use crate::model::{cpu, cpu_autodiff};
+use crate::model::{Compute, cpu};
 use crate::shape::{AnalyticSdf, PartShape, Sdf};
 
 /// Weights file name in the output directory.
@@ -147,6 +147,8 @@ pub struct ShapeTrainConfig {
     /// End this run after this many steps in total, with a checkpoint (the schedule still
     /// spans `steps`; continue with `resume`). None: run to `steps`.
     pub stop_at: Option<usize>,
+    /// Where the optimiser steps run (evaluation, saving and the codebook run on the CPU).
+    pub compute: Compute,
 }
 
 /// How a training step computes the SDF decoder's gradients. Both give the same gradients up
@@ -195,6 +197,7 @@ impl Default for ShapeTrainConfig {
             checkpoint_every: 1000,
             resume: false,
             stop_at: None,
+            compute: Compute::Cpu,
         }
     }
 }
@@ -257,6 +260,16 @@ impl ShapeTrainConfig {
                 "ema_decay",
                 "in [0, 1) (0 turns the EMA off)",
                 self.ema_decay,
+            ));
+        }
+        if self.compute != Compute::Cpu && self.decoder_backward == DecoderBackward::Host {
+            return Err(TrainError::config(
+                "decoder_backward",
+                format!(
+                    "burn with device {} (the host pass runs on the CPU)",
+                    self.compute.name()
+                ),
+                "host",
             ));
         }
         Ok(())
@@ -1311,7 +1324,7 @@ struct Trainer<'a> {
 
 impl<'a> Trainer<'a> {
     fn new(cfg: &'a ShapeTrainConfig, parts: &'a [PartSamples]) -> Self {
-        let device = cpu_autodiff();
+        let device = cfg.compute.autodiff();
         let model = ShapePrior::with_seed(&cfg.model, cfg.seed, &device);
         Trainer {
             cfg,
@@ -1362,12 +1375,16 @@ impl<'a> Trainer<'a> {
             .valid()
     }
 
-    /// The model the run evaluates and saves: the EMA weights when there is an EMA, else the
-    /// raw ones.
+    /// The model the run evaluates and saves, on the CPU: the EMA weights when there is an
+    /// EMA, else the raw ones.
     fn inference_model(&self) -> ShapePrior {
-        match &self.ema {
+        let model = match &self.ema {
             Some(ema) => ema.install(self.raw_model()),
             None => self.raw_model(),
+        };
+        match self.cfg.compute {
+            Compute::Cpu => model,
+            Compute::Gpu(_) => model.to_device(&cpu()),
         }
     }
 }
@@ -1723,6 +1740,7 @@ fn run(
         "queries_per_s": report.queries_per_s,
         "weights": WEIGHTS_FILE,
         "threads": rayon::current_num_threads(),
+        "device": cfg.compute.name(),
     });
     write_atomic(
         &out.join(REPORT_FILE),
@@ -2207,6 +2225,16 @@ mod tests {
             ..ShapeTrainConfig::default()
         };
         assert!(cfg.validate().unwrap_err().to_string().contains("lr"));
+        // The host backward pass is CPU code: a GPU run must take burn's.
+        let cfg = ShapeTrainConfig {
+            compute: Compute::Gpu(Some(0)),
+            ..ShapeTrainConfig::default()
+        };
+        let e = cfg.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("decoder_backward") && e.contains("gpu:0") && e.contains("host"),
+            "{e}"
+        );
         let dir = tempfile::tempdir().unwrap();
         let e = train_shape(
             dir.path(),
@@ -2289,7 +2317,7 @@ mod tests {
                 w_reg: 0.01,
                 ..ShapeTrainConfig::default()
             };
-            let device = cpu_autodiff();
+            let device = crate::model::cpu_autodiff();
             let model = ShapePrior::with_seed(&cfg.model, seed, &device)
                 .map(&mut Randomise(Rng::new(seed)));
             let mut rng = Rng::new(seed + 10);

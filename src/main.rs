@@ -304,6 +304,14 @@ struct ShapeArgs {
     /// `--features gpu`.
     #[arg(long, env = "PHYSNAP_TRAIN_DEVICE", default_value = "cpu")]
     device: String,
+    /// Start from these weights instead of the seeded initialisation: a shape_prior.safetensors
+    /// of the same sizes, or a directory holding one (weights/, a train shape output).
+    #[arg(long, env = "PHYSNAP_SHAPE_INIT_FROM")]
+    init_from: Option<PathBuf>,
+    /// Keep the encoder fixed (needs --init-from): only the decoder trains, so every part's code
+    /// stays what it was and a denoiser trained on those codes stays valid.
+    #[arg(long, env = "PHYSNAP_SHAPE_FREEZE_ENCODER")]
+    freeze_encoder: bool,
     /// Evaluate val IoU every this many steps (0: only at the end).
     #[arg(long, env = "PHYSNAP_SHAPE_EVAL_EVERY", default_value_t = 1000)]
     eval_every: usize,

@@ -69,6 +69,14 @@ pub fn shape(a: ShapeArgs) -> anyhow::Result<()> {
             _ => DecoderBackward::Host,
         },
         compute,
+        init_from: a.init_from.as_ref().map(|p| {
+            if p.is_dir() {
+                p.join("shape_prior.safetensors")
+            } else {
+                p.clone()
+            }
+        }),
+        freeze_encoder: a.freeze_encoder,
         ..defaults
     };
     let pb = super::progress_bar(cfg.steps, "shape");

@@ -78,7 +78,7 @@ pub const EMA_CHECKPOINT_FILE: &str = "shape_prior_ema.checkpoint.safetensors";
 /// The config fields a resumed run must share with its checkpoint (they define the run's
 /// batches, schedule and model); the others (threads, evaluation, checkpointing, the decoder's
 /// backward implementation) may change between pieces.
-const RESUME_FIELDS: [&str; 13] = [
+const RESUME_FIELDS: [&str; 14] = [
     "model",
     "max_parts",
     "steps",
@@ -92,6 +92,7 @@ const RESUME_FIELDS: [&str; 13] = [
     "truncation",
     "seed",
     "ema_decay",
+    "freeze_encoder",
 ];
 /// Largest number of validation parts evaluated.
 pub const MAX_VAL_PARTS: usize = 64;
@@ -149,6 +150,12 @@ pub struct ShapeTrainConfig {
     pub stop_at: Option<usize>,
     /// Where the optimiser steps run (evaluation, saving and the codebook run on the CPU).
     pub compute: Compute,
+    /// Start from these weights (a `shape_prior.safetensors` of the same sizes) instead of the
+    /// seeded initialisation: continued training, a second cosine cycle.
+    pub init_from: Option<PathBuf>,
+    /// Keep the encoder's weights fixed (needs `init_from`): only the decoder trains, so every
+    /// part's code, and with it a denoiser trained on those codes, stays valid.
+    pub freeze_encoder: bool,
 }
 
 /// How a training step computes the SDF decoder's gradients. Both give the same gradients up
@@ -198,6 +205,8 @@ impl Default for ShapeTrainConfig {
             resume: false,
             stop_at: None,
             compute: Compute::Cpu,
+            init_from: None,
+            freeze_encoder: false,
         }
     }
 }
@@ -262,6 +271,13 @@ impl ShapeTrainConfig {
                 self.ema_decay,
             ));
         }
+        if self.freeze_encoder && self.init_from.is_none() {
+            return Err(TrainError::config(
+                "freeze_encoder",
+                "init_from set (a frozen, randomly initialised encoder maps every part to noise)",
+                "true without init_from",
+            ));
+        }
         if self.compute != Compute::Cpu && self.decoder_backward == DecoderBackward::Host {
             return Err(TrainError::config(
                 "decoder_backward",
@@ -314,6 +330,8 @@ impl ShapeTrainConfig {
             "threads": self.threads,
             "decoder_backward": self.decoder_backward.name(),
             "checkpoint_every": self.checkpoint_every,
+            "init_from": self.init_from.as_ref().map(|p| p.display().to_string()),
+            "freeze_encoder": self.freeze_encoder,
         })
     }
 }
@@ -1532,6 +1550,7 @@ fn read_checkpoint(out: &Path, cfg: &ShapeTrainConfig) -> Result<Checkpoint, Tra
         // Checkpoints from before the EMA existed ran without one.
         let theirs = match &v["config"][field] {
             Value::Null if field == "ema_decay" => json!(0.0),
+            Value::Null if field == "freeze_encoder" => json!(false),
             x => x.clone(),
         };
         if theirs != ours[field] {
@@ -1625,6 +1644,13 @@ fn run(
     std::fs::create_dir_all(out).map_err(TrainError::io(out))?;
 
     let mut trainer = Trainer::new(cfg, &parts);
+    if let Some(init) = &cfg.init_from {
+        let model = load_shape_prior(init, &cfg.model, &trainer.device)?;
+        if cfg.ema_decay > 0.0 {
+            trainer.ema = Some(Ema::new(&model, cfg.ema_decay, 0));
+        }
+        trainer.model = Some(model);
+    }
     let mut losses = Vec::with_capacity(cfg.steps);
     let mut curve = Vec::new();
     let mut train_s = 0.0;
@@ -1648,6 +1674,14 @@ fn run(
         trainer.epoch = c.epoch;
         (losses, curve, train_s, elapsed_before, start) =
             (c.losses, c.curve, c.train_s, c.elapsed_s, c.step);
+    }
+    if cfg.freeze_encoder {
+        let mut model = trainer
+            .model
+            .take()
+            .expect("model is present between steps");
+        model.encoder = model.encoder.no_grad();
+        trainer.model = Some(model);
     }
     let end = cfg.stop_at.unwrap_or(cfg.steps).max(start);
     let t_train = Instant::now();
@@ -1940,6 +1974,61 @@ mod tests {
     /// update) equals the uninterrupted run's bit for bit, the first piece's losses and
     /// evaluations are kept, the checkpoint is removed at the end; a resume with other training
     /// options or mismatching weights is refused, naming the field or the file.
+    #[test]
+    fn freeze_encoder_trains_the_decoder_and_keeps_every_code() {
+        let data = tiny_dataset(12);
+        let train = data.path().join("train");
+        let short = ShapeTrainConfig {
+            steps: 10,
+            eval_every: 0,
+            ..tiny_config()
+        };
+        let base = data.path().join("base");
+        train_shape(&train, &short, &base, &mut |_| {}).unwrap();
+        let continued = |out: &str, freeze_encoder: bool| {
+            let cfg = ShapeTrainConfig {
+                init_from: Some(base.join(WEIGHTS_FILE)),
+                freeze_encoder,
+                seed: 1,
+                ..short.clone()
+            };
+            let out = data.path().join(out);
+            train_shape(&train, &cfg, &out, &mut |_| {}).unwrap();
+            out
+        };
+        let frozen = continued("frozen", true);
+        let free = continued("free", false);
+        let read = |dir: &Path, f: &str| std::fs::read(dir.join(f)).unwrap();
+        // Same codes, byte for byte, so a denoiser trained on them stays valid ...
+        assert_eq!(read(&base, CODEBOOK_FILE), read(&frozen, CODEBOOK_FILE));
+        // ... while the decoder moved, and without the freeze the encoder moves too.
+        assert_ne!(read(&base, WEIGHTS_FILE), read(&frozen, WEIGHTS_FILE));
+        assert_ne!(read(&base, CODEBOOK_FILE), read(&free, CODEBOOK_FILE));
+        // A config of other sizes is refused with the file's name.
+        let cfg = ShapeTrainConfig {
+            init_from: Some(base.join(WEIGHTS_FILE)),
+            model: ShapePriorConfig {
+                decoder_hidden: 24,
+                ..short.model
+            },
+            ..short.clone()
+        };
+        let e = train_shape(&train, &cfg, &data.path().join("bad"), &mut |_| {})
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(WEIGHTS_FILE), "{e}");
+        // Freezing a random encoder is refused.
+        let cfg = ShapeTrainConfig {
+            freeze_encoder: true,
+            ..short.clone()
+        };
+        let e = cfg.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("freeze_encoder") && e.contains("init_from"),
+            "{e}"
+        );
+    }
+
     #[test]
     fn stopped_run_resumes_from_its_checkpoint() {
         let data = tiny_dataset(39); // enough objects for a val split

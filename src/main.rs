@@ -247,6 +247,22 @@ enum TrainCommand {
     /// weights, its training report and every part of --data encoded), so `train diffusion`
     /// can train a new denoiser on it without retraining the shape prior.
     Encode(EncodeArgs),
+    /// Install a `train shape --freeze-encoder` output into a weights directory: its decoder
+    /// replaces the installed one while every code, and so the denoiser, stays valid (refused
+    /// when the encoder differs). Rewrites the manifest and the codebook and clears the
+    /// metrics, which `eval generative --write-manifest` measures again.
+    InstallShape(InstallShapeArgs),
+}
+
+#[derive(Args, Debug)]
+struct InstallShapeArgs {
+    /// Shape prior directory (output of `physnap train shape`, trained with --freeze-encoder
+    /// from these weights).
+    #[arg(long, env = "PHYSNAP_SHAPE")]
+    shape: PathBuf,
+    /// Weights directory to update (manifest.json + shape_prior.safetensors).
+    #[arg(long, env = "PHYSNAP_WEIGHTS")]
+    weights: PathBuf,
 }
 
 #[derive(Args, Debug)]
@@ -888,6 +904,7 @@ fn run(command: Command) -> anyhow::Result<()> {
             TrainCommand::Diffusion(a) => model_cmd::diffusion(a),
             TrainCommand::Codebook(a) => model_cmd::codebook(a),
             TrainCommand::Encode(a) => model_cmd::encode(a),
+            TrainCommand::InstallShape(a) => model_cmd::install_shape(a),
         },
         Command::Generate(a) => model_cmd::generate(a),
         Command::Serve(a) => serve_cmd::serve(a),

@@ -29,10 +29,14 @@ use physnap::train::codebook::{
 };
 use physnap::train::diffusion::{DiffusionTrainConfig, load_data, train_diffusion};
 use physnap::train::shape::{
-    DecoderBackward, ShapeTrainConfig, encode_shape_dir, read_model_config, train_shape,
+    DecoderBackward, ShapeTrainConfig, encode_shape_dir, load_shape_prior, read_model_config,
+    train_shape,
 };
 
-use super::{CodebookArgs, DiffusionArgs, EncodeArgs, EvalGuidedArgs, GenerateArgs, ShapeArgs};
+use super::{
+    CodebookArgs, DiffusionArgs, EncodeArgs, EvalGuidedArgs, GenerateArgs, InstallShapeArgs,
+    ShapeArgs,
+};
 
 pub fn shape(a: ShapeArgs) -> anyhow::Result<()> {
     let defaults = ShapeTrainConfig::default();
@@ -156,6 +160,89 @@ pub fn encode(a: EncodeArgs) -> anyhow::Result<()> {
         t.elapsed().as_secs_f64(),
         a.out.display()
     );
+    Ok(())
+}
+
+pub fn install_shape(a: InstallShapeArgs) -> anyhow::Result<()> {
+    let path = a.weights.join("manifest.json");
+    let text =
+        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let mut manifest = physnap::io::manifest::from_str(&text, &path.display().to_string())?;
+    let installed = a.weights.join(&manifest.shape_prior.file);
+    let old_bytes =
+        std::fs::read(&installed).with_context(|| format!("reading {}", installed.display()))?;
+    if sha256_hex(&old_bytes) != manifest.shape_prior.sha256 {
+        bail!(
+            "{}: sha256 does not match manifest.json's shape_prior.sha256 {}; the file is corrupt or from other weights",
+            installed.display(),
+            manifest.shape_prior.sha256
+        );
+    }
+    let report_path = a.shape.join("shape_train.json");
+    let cfg = read_model_config(&report_path)?;
+    if cfg != manifest.shape_prior.config {
+        bail!(
+            "{}: model sizes {cfg:?} differ from the installed shape prior's {:?}",
+            report_path.display(),
+            manifest.shape_prior.config
+        );
+    }
+    let candidate = a.shape.join("shape_prior.safetensors");
+    let device = physnap::model::cpu();
+    let old = load_shape_prior(&installed, &cfg, &device)?;
+    let new = load_shape_prior(&candidate, &cfg, &device)?;
+    // Same encoder = same function: both encode the same 8 × 256 seeded points to the same
+    // bits (weights that differ anywhere change the codes).
+    let mut rng = physnap::data::rng::Rng::new(0x5eed);
+    let points: Vec<f32> = (0..8 * 256 * 3)
+        .map(|_| (rng.uniform() - 0.5) as f32)
+        .collect();
+    let probe = || {
+        burn::tensor::Tensor::<3>::from_data(
+            burn::tensor::TensorData::new(points.clone(), [8, 256, 3]),
+            &device,
+        )
+    };
+    let codes = |m: &physnap::model::shape_prior::ShapePrior| -> Vec<f32> {
+        m.encoder
+            .encode(probe())
+            .into_data()
+            .try_into_vec::<f32>()
+            .expect("model outputs are f32")
+    };
+    if codes(&old) != codes(&new) {
+        bail!(
+            "{}: its encoder differs from the installed one in {}, so every part's code, and the denoiser trained on them, would change; train it with --init-from {} --freeze-encoder, or train a new denoiser on it (train diffusion)",
+            candidate.display(),
+            a.weights.display(),
+            a.weights.display()
+        );
+    }
+    let new_bytes =
+        std::fs::read(&candidate).with_context(|| format!("reading {}", candidate.display()))?;
+    let tmp = installed.with_extension("safetensors.tmp");
+    std::fs::write(&tmp, &new_bytes).with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, &installed)
+        .with_context(|| format!("replacing {}", installed.display()))?;
+    let report: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(&report_path)
+            .with_context(|| format!("reading {}", report_path.display()))?,
+    )
+    .with_context(|| format!("parsing {}", report_path.display()))?;
+    manifest.shape_prior.sha256 = sha256_hex(&new_bytes);
+    // The run this one continued stays on record; the metrics were measured with the old
+    // decoder.
+    manifest.training["shape_base"] = manifest.training["shape"].take();
+    manifest.training["shape"] = report;
+    manifest.metrics = serde_json::Value::Null;
+    std::fs::write(&path, manifest_to_string(&manifest))
+        .with_context(|| format!("writing {}", path.display()))?;
+    println!(
+        "installed the shape prior of {} into {} (same encoder, so the codes and the denoiser are unchanged); the manifest's metrics are cleared: run eval generative --write-manifest",
+        a.shape.display(),
+        a.weights.display()
+    );
+    write_codebook(&a.shape, &a.weights, DEFAULT_CHECK_RESOLUTION)?;
     Ok(())
 }
 

@@ -657,6 +657,94 @@ fn synth_import_train_generate() {
     ]);
     assert!(String::from_utf8_lossy(&o.stderr).contains("no trained weights"));
 
+    // `train shape --init-from weights --freeze-encoder` trains the decoder on with every code
+    // unchanged, and `train install-shape` puts it into the weights: new sha256, metrics
+    // cleared, the old report kept, and the weights still generate. A run whose encoder moved
+    // is refused.
+    let tiny_model = [
+        "--steps",
+        "3",
+        "--batch-parts",
+        "4",
+        "--decoder-hidden",
+        "48",
+        "--decoder-blocks",
+        "2",
+        "--encoder-hidden",
+        "32",
+        "--encoder-blocks",
+        "1",
+        "--queries-per-part",
+        "512",
+        "--surface-points",
+        "64",
+        "--init-from",
+        s(&weights),
+    ];
+    let ft = root.path().join("ft");
+    let moved = root.path().join("moved");
+    for (out, freeze) in [(&ft, true), (&moved, false)] {
+        let mut args = vec!["train", "shape", "--data", s(&data), "--out", s(out)];
+        args.extend(tiny_model);
+        if freeze {
+            args.push("--freeze-encoder");
+        }
+        ok(&args);
+    }
+    assert_eq!(
+        std::fs::read(ft.join("codebook.npy")).unwrap(),
+        std::fs::read(shape.join("codebook.npy")).unwrap()
+    );
+    let o = physnap(&[
+        "train",
+        "install-shape",
+        "--shape",
+        s(&moved),
+        "--weights",
+        s(&weights),
+    ]);
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        e.contains("encoder differs") && e.contains("--freeze-encoder"),
+        "{e}"
+    );
+    ok(&[
+        "train",
+        "install-shape",
+        "--shape",
+        s(&ft),
+        "--weights",
+        s(&weights),
+    ]);
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(weights.join("manifest.json")).unwrap())
+            .unwrap();
+    let installed = std::fs::read(weights.join("shape_prior.safetensors")).unwrap();
+    assert_eq!(
+        installed,
+        std::fs::read(ft.join("shape_prior.safetensors")).unwrap()
+    );
+    assert_eq!(
+        m["shape_prior"]["sha256"],
+        physnap::model::weights::sha256_hex(&installed)
+    );
+    assert!(m["metrics"].is_null(), "{m:#}");
+    assert_eq!(m["training"]["shape"]["config"]["freeze_encoder"], true);
+    assert_eq!(m["training"]["shape_base"]["steps"], 6);
+    let gen_ft = root.path().join("gen_ft");
+    ok(&[
+        "generate",
+        "--weights",
+        s(&weights),
+        "--samples",
+        "1",
+        "--resolution",
+        "16",
+        "--out",
+        s(&gen_ft),
+    ]);
+
     // A corrupted weights file is refused with a checksum error.
     let w = weights.join("denoiser.safetensors");
     flip_byte(&w);

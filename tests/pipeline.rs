@@ -803,6 +803,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             .env("IMPORT_FLAGS", "--uniform 256 --near 256 --surface 64")
             .env("SHAPE_FLAGS", "--batch-parts 4")
             .env("DENOISER_FLAGS", "--width 32 --layers 1")
+            .env("DECODER_STEPS", "2")
             .env("EVAL", "0")
             .output()
             .unwrap()
@@ -838,6 +839,13 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     );
     // The recipe's denoiser adds its category to every graph layer, as the shipped one does.
     assert_eq!(m["denoiser"]["config"]["category_layers"], true, "{m:#}");
+    // Then the decoder's second cycle, encoder frozen, is installed over the first prior.
+    assert!(err.contains("+ physnap train install-shape"), "{err}");
+    assert_eq!(
+        m["training"]["shape"]["config"]["freeze_encoder"], true,
+        "{m:#}"
+    );
+    assert_eq!(m["training"]["shape_base"]["steps"], 4, "{m:#}");
     // Bad stage order is refused before anything runs.
     let o = Command::new("bash")
         .arg(concat!(

@@ -75,22 +75,10 @@ fn synth_import_train_generate() {
     ]);
     // Under `output()` stderr is not a terminal: the bar is hidden and progress comes as log
     // lines every --progress-interval seconds instead.
-    let o = physnap(&[
-        "--log",
-        "info",
-        "--progress-interval",
-        "0.02",
-        "train",
-        "shape",
-        "--data",
-        s(&data),
-        "--out",
-        s(&shape),
-        "--steps",
-        "6",
+    // A non-default model and loss: the sizes flow through the manifest to every loader.
+    let sizes = [
         "--batch-parts",
         "4",
-        // A non-default model and loss: the sizes flow through the manifest to every loader.
         "--decoder-hidden",
         "48",
         "--decoder-blocks",
@@ -103,9 +91,25 @@ fn synth_import_train_generate() {
         "512",
         "--surface-points",
         "64",
+    ];
+    let mut args = vec![
+        "--log",
+        "info",
+        "--progress-interval",
+        "0.02",
+        "train",
+        "shape",
+        "--data",
+        s(&data),
+        "--out",
+        s(&shape),
+        "--steps",
+        "6",
         "--truncation",
         "0.1",
-    ]);
+    ];
+    args.extend(sizes);
+    let o = physnap(&args);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "train shape failed:\n{err}");
     let report: serde_json::Value =
@@ -661,31 +665,12 @@ fn synth_import_train_generate() {
     // unchanged, and `train install-shape` puts it into the weights: new sha256, metrics
     // cleared, the old report kept, and the weights still generate. A run whose encoder moved
     // is refused.
-    let tiny_model = [
-        "--steps",
-        "3",
-        "--batch-parts",
-        "4",
-        "--decoder-hidden",
-        "48",
-        "--decoder-blocks",
-        "2",
-        "--encoder-hidden",
-        "32",
-        "--encoder-blocks",
-        "1",
-        "--queries-per-part",
-        "512",
-        "--surface-points",
-        "64",
-        "--init-from",
-        s(&weights),
-    ];
     let ft = root.path().join("ft");
     let moved = root.path().join("moved");
     for (out, freeze) in [(&ft, true), (&moved, false)] {
         let mut args = vec!["train", "shape", "--data", s(&data), "--out", s(out)];
-        args.extend(tiny_model);
+        args.extend(["--steps", "3", "--init-from", s(&weights)]);
+        args.extend(sizes);
         if freeze {
             args.push("--freeze-encoder");
         }

@@ -1969,11 +1969,7 @@ mod tests {
         );
     }
 
-    /// A run split by `stop_at` + `resume` continues the same batch stream and report: the
-    /// first resumed step's loss (the checkpoint's weights on the next batch, before any Adam
-    /// update) equals the uninterrupted run's bit for bit, the first piece's losses and
-    /// evaluations are kept, the checkpoint is removed at the end; a resume with other training
-    /// options or mismatching weights is refused, naming the field or the file.
+    /// `init_from` + `freeze_encoder` trains the decoder only: the codes stay byte-identical.
     #[test]
     fn freeze_encoder_trains_the_decoder_and_keeps_every_code() {
         let data = tiny_dataset(12);
@@ -2029,6 +2025,11 @@ mod tests {
         );
     }
 
+    /// A run split by `stop_at` + `resume` continues the same batch stream and report: the
+    /// first resumed step's loss (the checkpoint's weights on the next batch, before any Adam
+    /// update) equals the uninterrupted run's bit for bit, the first piece's losses and
+    /// evaluations are kept, the checkpoint is removed at the end; a resume with other training
+    /// options or mismatching weights is refused, naming the field or the file.
     #[test]
     fn stopped_run_resumes_from_its_checkpoint() {
         let data = tiny_dataset(39); // enough objects for a val split

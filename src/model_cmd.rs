@@ -1,7 +1,7 @@
 //! `physnap train …` and `physnap generate`: flags to library calls, progress bars, reports.
 
 use std::ops::ControlFlow;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 
@@ -30,7 +30,7 @@ use physnap::train::codebook::{
 use physnap::train::diffusion::{DiffusionTrainConfig, load_data, train_diffusion};
 use physnap::train::shape::{
     DecoderBackward, ShapeTrainConfig, encode_shape_dir, load_shape_prior, read_model_config,
-    train_shape,
+    train_shape, write_atomic,
 };
 
 use super::{
@@ -127,12 +127,14 @@ pub fn shape(a: ShapeArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-pub fn encode(a: EncodeArgs) -> anyhow::Result<()> {
-    let path = a.weights.join("manifest.json");
+/// A weights directory's manifest (and its path) and the path of its shape prior, whose sha256
+/// is checked against the manifest's.
+fn manifest_with_shape_prior(weights: &Path) -> anyhow::Result<(Manifest, PathBuf, PathBuf)> {
+    let path = weights.join("manifest.json");
     let text =
         std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
     let manifest = physnap::io::manifest::from_str(&text, &path.display().to_string())?;
-    let file = a.weights.join(&manifest.shape_prior.file);
+    let file = weights.join(&manifest.shape_prior.file);
     let sha =
         sha256_hex(&std::fs::read(&file).with_context(|| format!("reading {}", file.display()))?);
     if sha != manifest.shape_prior.sha256 {
@@ -142,6 +144,11 @@ pub fn encode(a: EncodeArgs) -> anyhow::Result<()> {
             manifest.shape_prior.sha256
         );
     }
+    Ok((manifest, path, file))
+}
+
+pub fn encode(a: EncodeArgs) -> anyhow::Result<()> {
+    let (manifest, path, file) = manifest_with_shape_prior(&a.weights)?;
     let report = &manifest.training["shape"];
     if !report.is_object() {
         bail!(
@@ -164,20 +171,7 @@ pub fn encode(a: EncodeArgs) -> anyhow::Result<()> {
 }
 
 pub fn install_shape(a: InstallShapeArgs) -> anyhow::Result<()> {
-    let path = a.weights.join("manifest.json");
-    let text =
-        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-    let mut manifest = physnap::io::manifest::from_str(&text, &path.display().to_string())?;
-    let installed = a.weights.join(&manifest.shape_prior.file);
-    let old_bytes =
-        std::fs::read(&installed).with_context(|| format!("reading {}", installed.display()))?;
-    if sha256_hex(&old_bytes) != manifest.shape_prior.sha256 {
-        bail!(
-            "{}: sha256 does not match manifest.json's shape_prior.sha256 {}; the file is corrupt or from other weights",
-            installed.display(),
-            manifest.shape_prior.sha256
-        );
-    }
+    let (mut manifest, path, installed) = manifest_with_shape_prior(&a.weights)?;
     let report_path = a.shape.join("shape_train.json");
     let cfg = read_model_config(&report_path)?;
     if cfg != manifest.shape_prior.config {
@@ -220,10 +214,7 @@ pub fn install_shape(a: InstallShapeArgs) -> anyhow::Result<()> {
     }
     let new_bytes =
         std::fs::read(&candidate).with_context(|| format!("reading {}", candidate.display()))?;
-    let tmp = installed.with_extension("safetensors.tmp");
-    std::fs::write(&tmp, &new_bytes).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, &installed)
-        .with_context(|| format!("replacing {}", installed.display()))?;
+    write_atomic(&installed, &new_bytes)?;
     let report: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(&report_path)
             .with_context(|| format!("reading {}", report_path.display()))?,

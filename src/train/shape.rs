@@ -907,7 +907,7 @@ fn fit_codes(
 }
 
 /// Write `bytes` to `path` atomically (temp file + rename).
-fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), TrainError> {
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), TrainError> {
     let tmp = path.with_extension("tmp");
     std::fs::write(&tmp, bytes).map_err(TrainError::io(&tmp))?;
     std::fs::rename(&tmp, path).map_err(TrainError::io(path))
@@ -1341,10 +1341,14 @@ struct Trainer<'a> {
 }
 
 impl<'a> Trainer<'a> {
-    fn new(cfg: &'a ShapeTrainConfig, parts: &'a [PartSamples]) -> Self {
+    /// The run's starting point: `init_from`'s weights, else the seeded initialisation.
+    fn new(cfg: &'a ShapeTrainConfig, parts: &'a [PartSamples]) -> Result<Self, TrainError> {
         let device = cfg.compute.autodiff();
-        let model = ShapePrior::with_seed(&cfg.model, cfg.seed, &device);
-        Trainer {
+        let model = match &cfg.init_from {
+            Some(init) => load_shape_prior(init, &cfg.model, &device)?,
+            None => ShapePrior::with_seed(&cfg.model, cfg.seed, &device),
+        };
+        Ok(Trainer {
             cfg,
             parts,
             ema: (cfg.ema_decay > 0.0).then(|| Ema::new(&model, cfg.ema_decay, 0)),
@@ -1353,7 +1357,7 @@ impl<'a> Trainer<'a> {
             rng: Rng::fork(cfg.seed, 1),
             epoch: Vec::new(),
             device,
-        }
+        })
     }
 
     /// One optimiser step (0-based `step`): (loss, learning rate).
@@ -1643,14 +1647,7 @@ fn run(
     let grid: Vec<f32> = grid_pts.into_iter().flatten().collect();
     std::fs::create_dir_all(out).map_err(TrainError::io(out))?;
 
-    let mut trainer = Trainer::new(cfg, &parts);
-    if let Some(init) = &cfg.init_from {
-        let model = load_shape_prior(init, &cfg.model, &trainer.device)?;
-        if cfg.ema_decay > 0.0 {
-            trainer.ema = Some(Ema::new(&model, cfg.ema_decay, 0));
-        }
-        trainer.model = Some(model);
-    }
+    let mut trainer = Trainer::new(cfg, &parts)?;
     let mut losses = Vec::with_capacity(cfg.steps);
     let mut curve = Vec::new();
     let mut train_s = 0.0;
@@ -2595,7 +2592,7 @@ mod tests {
                 decoder_backward: backward,
                 ..ShapeTrainConfig::default()
             };
-            let mut trainer = Trainer::new(&cfg, &parts);
+            let mut trainer = Trainer::new(&cfg, &parts).unwrap();
             trainer.step(0).unwrap();
             let n = 10;
             let t0 = Instant::now();

@@ -385,6 +385,10 @@ struct ShapeArgs {
     /// Val parts evaluated every --eval-every steps (default 32, at most 64).
     #[arg(long, env = "PHYSNAP_SHAPE_VAL_PARTS")]
     val_parts: Option<usize>,
+    /// Weight of the eikonal term (|∇f| = 1 by forward differences on a quarter of the
+    /// near-surface queries; default 0: off, as NAP).
+    #[arg(long, env = "PHYSNAP_SHAPE_EIKONAL")]
+    eikonal: Option<f64>,
 }
 
 #[derive(Args, Debug)]

@@ -81,6 +81,7 @@ pub fn shape(a: ShapeArgs) -> anyhow::Result<()> {
             }
         }),
         freeze_encoder: a.freeze_encoder,
+        eikonal: a.eikonal.unwrap_or(defaults.eikonal),
         ..defaults
     };
     let pb = super::progress_bar(cfg.steps, "shape");

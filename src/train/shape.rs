@@ -13,7 +13,9 @@
 //!   part — a `near_fraction` share (default ½, as NAP) near-surface, the rest uniform, with
 //!   replacement as NAP does — and `surface_points` encoder points (without replacement when
 //!   the part has enough); loss =
-//!   mean |f̂ − f| + w_reg · mean(z²), optionally truncated to the band [−δ, δ];
+//!   mean |f̂ − f| + w_reg · mean(z²), optionally truncated to the band [−δ, δ], optionally
+//!   plus the eikonal term w_eik · mean (|∇̃f| − 1)² on a quarter of the near-surface queries
+//!   (forward differences, [`EIKONAL_STEP`]; off by default);
 //! - Adam with a cosine decay from `lr` to `lr · lr_final_factor`;
 //! - every `eval_every` steps and at the end: mean IoU of `SDF < 0` against ground truth on a
 //!   `iou_resolution`³ grid of cell centres over [−0.55, 0.55]³, codes encoded from each val
@@ -156,7 +158,17 @@ pub struct ShapeTrainConfig {
     /// Keep the encoder's weights fixed (needs `init_from`): only the decoder trains, so every
     /// part's code, and with it a denoiser trained on those codes, stays valid.
     pub freeze_encoder: bool,
+    /// Weight of the eikonal term on the near-surface queries ([`eikonal_term`]; 0: off, as
+    /// NAP). It asks the decoder for a field of slope 1, a signed distance, instead of the
+    /// flatter field an L1 fit leaves (slope 0.3–0.5 on the shipped prior's surfaces, which
+    /// guidance can flatten further; EVALUATION.md).
+    pub eikonal: f64,
 }
+
+/// Finite-difference step of the eikonal term, normalised units (a third of a 64³ IoU cell).
+pub const EIKONAL_STEP: f32 = 0.005;
+/// Share of each part's near-surface queries that also carry the eikonal term.
+pub const EIKONAL_SHARE: usize = 4;
 
 /// How a training step computes the SDF decoder's gradients. Both give the same gradients up
 /// to float summation order (tested); the host pass is the fast one.
@@ -207,6 +219,7 @@ impl Default for ShapeTrainConfig {
             compute: Compute::Cpu,
             init_from: None,
             freeze_encoder: false,
+            eikonal: 0.0,
         }
     }
 }
@@ -278,6 +291,13 @@ impl ShapeTrainConfig {
                 "true without init_from",
             ));
         }
+        if !(self.eikonal.is_finite() && (0.0..=100.0).contains(&self.eikonal)) {
+            return Err(TrainError::config(
+                "eikonal",
+                "between 0 and 100 (0 turns it off)",
+                self.eikonal,
+            ));
+        }
         if self.compute != Compute::Cpu && self.decoder_backward == DecoderBackward::Host {
             return Err(TrainError::config(
                 "decoder_backward",
@@ -332,6 +352,7 @@ impl ShapeTrainConfig {
             "checkpoint_every": self.checkpoint_every,
             "init_from": self.init_from.as_ref().map(|p| p.display().to_string()),
             "freeze_encoder": self.freeze_encoder,
+            "eikonal": self.eikonal,
         })
     }
 }
@@ -1236,6 +1257,82 @@ fn decoder_linears(decoder: &ShapeDecoder) -> Vec<&Linear> {
     out
 }
 
+/// The eikonal term of a step and its gradient with respect to the decoder's outputs.
+struct Eikonal {
+    /// w · mean over the chosen rows of (|∇̃f| − 1)².
+    value: f64,
+    /// The shifted probes q + h·e_k (three per chosen row), normalised frame.
+    probes: Vec<[f32; 3]>,
+    /// Their part indices.
+    probe_idx: Vec<usize>,
+    /// ∂(term)/∂f at each probe.
+    probe_upstream: Vec<f32>,
+    /// ∂(term)/∂f at each row of the batch (0 for rows not chosen).
+    base_upstream: Vec<f32>,
+}
+
+/// The eikonal term on the `chosen` rows of a batch (physnap, off by default):
+///
+/// ```text
+/// ∇̃f(q) = ((f(q + h e_x) − f(q)) / h, (f(q + h e_y) − f(q)) / h, (f(q + h e_z) − f(q)) / h)
+/// L_eik  = w · mean_q (|∇̃f(q)| − 1)²          h = EIKONAL_STEP (normalised units)
+/// ```
+///
+/// Forward differences keep it first-order: the probes are ordinary decoder rows, so the host
+/// pass differentiates the term with the same code as the L1 term. One forward pass here reads
+/// f at the chosen rows and probes; the gradient is returned per row for the backward pass.
+fn eikonal_term(
+    host: &HostDecoder,
+    q: &[[f32; 3]],
+    features: &[f32],
+    idx: &[usize],
+    chosen: &[usize],
+    weight: f32,
+) -> Eikonal {
+    let h = EIKONAL_STEP;
+    let mut probes = Vec::with_capacity(3 * chosen.len());
+    let mut probe_idx = Vec::with_capacity(3 * chosen.len());
+    let mut at = Vec::with_capacity(4 * chosen.len());
+    let mut at_idx = Vec::with_capacity(4 * chosen.len());
+    for &r in chosen {
+        at.push(q[r]);
+        at_idx.push(idx[r]);
+        for k in 0..3 {
+            let mut p = q[r];
+            p[k] += h;
+            probes.push(p);
+            probe_idx.push(idx[r]);
+            at.push(p);
+            at_idx.push(idx[r]);
+        }
+    }
+    let mut f = vec![0.0; at.len()];
+    host.eval(&at, features, &at_idx, &mut f);
+    let m = chosen.len().max(1) as f32;
+    let mut value = 0.0f64;
+    let mut probe_upstream = vec![0.0; probes.len()];
+    let mut base_upstream = vec![0.0; q.len()];
+    for (c, &r) in chosen.iter().enumerate() {
+        let f0 = f[4 * c];
+        let d: [f32; 3] = std::array::from_fn(|k| (f[4 * c + 1 + k] - f0) / h);
+        let g = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt().max(1e-6);
+        value += (weight * (g - 1.0) * (g - 1.0) / m) as f64;
+        // ∂/∂f_k of w (g − 1)² / m, with ∂g/∂f_k = d_k / (g h); f0 enters every d_k with −1.
+        let common = 2.0 * weight * (g - 1.0) / (m * g * h);
+        for k in 0..3 {
+            probe_upstream[3 * c + k] = common * d[k];
+            base_upstream[r] -= common * d[k];
+        }
+    }
+    Eikonal {
+        value,
+        probes,
+        probe_idx,
+        probe_upstream,
+        base_upstream,
+    }
+}
+
 /// The decoder half of a training step with [`DecoderBackward::Host`]: the host pass computes
 /// the L1 term's value and its gradients ([`HostDecoder::weight_grads`]), and burn gets
 ///
@@ -1261,16 +1358,52 @@ fn host_decoder_surrogate(
     let q: Vec<[f32; 3]> = pts.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
     let idx: Vec<usize> = (0..q.len()).map(|r| r / queries_per_part).collect();
     let n = q.len() as f32;
-    let g = host.weight_grads(&q, &feature_values, &idx, &|r, f| {
-        l1_upstream(f, tgt[r], cfg.truncation).1 / n
+    let rows = q.len();
+    let eik = (cfg.eikonal > 0.0).then(|| {
+        let near = cfg.near_queries();
+        let per_part = (near / EIKONAL_SHARE).max(1).min(near);
+        let chosen: Vec<usize> = (0..rows / queries_per_part)
+            .flat_map(|p| {
+                let first = p * queries_per_part + queries_per_part - near;
+                first..first + per_part
+            })
+            .collect();
+        eikonal_term(
+            &host,
+            &q,
+            &feature_values,
+            &idx,
+            &chosen,
+            cfg.eikonal as f32,
+        )
     });
-    let l1 = g
-        .values
+    // The eikonal term's shifted probes join the batch as extra rows; its gradient on the base
+    // rows is added to theirs.
+    let (q, idx, extra_up) = match &eik {
+        Some(e) => {
+            let mut q = q.clone();
+            let mut idx = idx.clone();
+            q.extend_from_slice(&e.probes);
+            idx.extend_from_slice(&e.probe_idx);
+            (q, idx, Some(e))
+        }
+        None => (q, idx, None),
+    };
+    let g = host.weight_grads(&q, &feature_values, &idx, &|r, f| {
+        if r < rows {
+            l1_upstream(f, tgt[r], cfg.truncation).1 / n
+                + extra_up.map_or(0.0, |e| e.base_upstream[r])
+        } else {
+            extra_up.map_or(0.0, |e| e.probe_upstream[r - rows])
+        }
+    });
+    let l1 = g.values[..rows]
         .iter()
         .zip(tgt)
         .map(|(&f, &t)| l1_upstream(f, t, cfg.truncation).0 as f64)
         .sum::<f64>()
-        / q.len().max(1) as f64;
+        / rows.max(1) as f64
+        + eik.as_ref().map_or(0.0, |e| e.value);
     let p = feature_values.len() / hidden;
     let d_features = Tensor::<2>::from_data(TensorData::new(g.d_features, [p, hidden]), &device);
     let mut surrogate = (features * d_features).sum();
@@ -1306,12 +1439,30 @@ fn batch_loss(
         DecoderBackward::Burn => {
             let pts = Tensor::from_data(TensorData::new(batch.pts, [b, q, 3]), device);
             let tgt = Tensor::from_data(TensorData::new(batch.tgt, [b, q]), device);
-            let pred = model.decoder.sdf(pts, z);
+            let pred = model.decoder.sdf(pts.clone(), z.clone());
             let diff = match cfg.truncation {
                 Some(d) => truncated_residual(pred, tgt, d),
                 None => pred - tgt,
             };
-            let loss = diff.abs().mean() + reg;
+            let mut loss = diff.abs().mean() + reg;
+            if cfg.eikonal > 0.0 {
+                // The reference form of `eikonal_term`, through burn's autodiff.
+                let near = cfg.near_queries();
+                let per_part = (near / EIKONAL_SHARE).max(1).min(near);
+                let p0 = pts.narrow(1, q - near, per_part);
+                let f0 = model.decoder.sdf(p0.clone(), z.clone());
+                let mut g2 = f0.zeros_like();
+                for k in 0..3 {
+                    let mut e = [0.0f32; 3];
+                    e[k] = EIKONAL_STEP;
+                    let shift =
+                        Tensor::<3>::from_data(TensorData::new(e.to_vec(), [1, 1, 3]), device);
+                    let fk = model.decoder.sdf(p0.clone() + shift, z.clone());
+                    g2 = g2 + ((fk - f0.clone()) / EIKONAL_STEP).powi_scalar(2);
+                }
+                let g = g2.sqrt().clamp_min(1e-6);
+                loss = loss + (g - 1.0).powi_scalar(2).mean().mul_scalar(cfg.eikonal);
+            }
             let value = loss.clone().into_scalar::<f32>() as f64;
             (loss, value)
         }
@@ -2312,6 +2463,15 @@ mod tests {
             ..ShapeTrainConfig::default()
         };
         assert!(cfg.validate().unwrap_err().to_string().contains("lr"));
+        let cfg = ShapeTrainConfig {
+            eikonal: -0.5,
+            ..ShapeTrainConfig::default()
+        };
+        let e = cfg.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("eikonal") && e.contains("between 0 and 100") && e.contains("-0.5"),
+            "{e}"
+        );
         // The host backward pass is CPU code: a GPU run must take burn's.
         let cfg = ShapeTrainConfig {
             compute: Compute::Gpu(Some(0)),
@@ -2365,7 +2525,7 @@ mod tests {
 
     /// The host decoder pass ([`DecoderBackward::Host`]) gives burn autodiff's loss value and
     /// gradients for every parameter — decoder layers, W_c, and the encoder through the codes —
-    /// with and without truncation, with and without positional encoding and residual blocks.
+    /// with and without truncation, the eikonal term, positional encoding and residual blocks.
     #[test]
     fn host_decoder_backward_equals_burn_autodiff() {
         struct Randomise(Rng);
@@ -2382,11 +2542,13 @@ mod tests {
                 })
             }
         }
-        for (seed, pe_freqs, blocks, truncation, code_every_block) in [
-            (1, 4, 2, None, false),
-            (2, 0, 1, Some(0.05), false),
-            (3, 6, 0, None, false),
-            (4, 4, 3, None, true),
+        for (seed, pe_freqs, blocks, truncation, code_every_block, eikonal) in [
+            (1, 4, 2, None, false, 0.0),
+            (2, 0, 1, Some(0.05), false, 0.0),
+            (3, 6, 0, None, false, 0.0),
+            (4, 4, 3, None, true, 0.0),
+            (5, 4, 2, None, false, 0.7),
+            (6, 6, 1, Some(0.05), true, 2.0),
         ] {
             let cfg = ShapeTrainConfig {
                 model: ShapePriorConfig {
@@ -2401,6 +2563,7 @@ mod tests {
                 queries_per_part: 350, // 3 × 350 rows: several 128-row blocks and a partial one
                 surface_points: 40,
                 truncation,
+                eikonal,
                 w_reg: 0.01,
                 ..ShapeTrainConfig::default()
             };
@@ -2453,17 +2616,37 @@ mod tests {
             };
             let (host_value, host) = run(DecoderBackward::Host);
             let (burn_value, burn) = run(DecoderBackward::Burn);
+            if eikonal > 0.0 {
+                // The term is there: the same batch without it has a different loss.
+                let plain = ShapeTrainConfig {
+                    eikonal: 0.0,
+                    ..cfg.clone()
+                };
+                let batch = Batch {
+                    pts: pts.clone(),
+                    tgt: tgt.clone(),
+                    surf: surf.clone(),
+                };
+                let (_, without) = batch_loss(&model, batch, &plain, &device);
+                assert!(
+                    (host_value - without).abs() > 1e-3,
+                    "seed {seed}: eikonal {eikonal} left the loss at {without}"
+                );
+            }
             assert!(
                 (host_value - burn_value).abs() <= 1e-5 * burn_value.abs().max(1.0),
                 "loss: host {host_value} vs burn {burn_value}"
             );
             assert_eq!(host.len(), burn.len());
+            // The eikonal term divides the two implementations' f32 rounding of f by h = 0.005
+            // (forward differences), so its gradients agree to 2·10⁻³, the rest to 10⁻⁴.
+            let tol = if eikonal > 0.0 { 2e-3 } else { 1e-4 };
             for ((name, h), (_, w)) in host.iter().zip(&burn) {
                 let scale = w.iter().fold(0.0f32, |m, v| m.max(v.abs()));
                 assert!(scale > 0.0, "{name}: burn's gradient is all zero");
                 for (i, (x, y)) in h.iter().zip(w).enumerate() {
                     assert!(
-                        (x - y).abs() <= 1e-4 * scale,
+                        (x - y).abs() <= tol * scale,
                         "seed {seed} {name}[{i}]: host {x} vs burn {y} (scale {scale})"
                     );
                 }

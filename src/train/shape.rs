@@ -317,6 +317,16 @@ impl ShapeTrainConfig {
         (self.queries_per_part as f64 * self.near_fraction).round() as usize
     }
 
+    /// The rows of each part that carry the eikonal term: (offset within the part's queries,
+    /// count) — the first 1/[`EIKONAL_SHARE`] of its near-surface queries (at least one).
+    pub fn eikonal_rows(&self) -> (usize, usize) {
+        let near = self.near_queries();
+        (
+            self.queries_per_part - near,
+            (near / EIKONAL_SHARE).max(1).min(near),
+        )
+    }
+
     /// Learning rate at `step` (0-based): cosine from `lr` to `lr · lr_final_factor`.
     pub fn lr_at(&self, step: usize) -> f64 {
         let t = if self.steps > 1 {
@@ -1360,11 +1370,10 @@ fn host_decoder_surrogate(
     let n = q.len() as f32;
     let rows = q.len();
     let eik = (cfg.eikonal > 0.0).then(|| {
-        let near = cfg.near_queries();
-        let per_part = (near / EIKONAL_SHARE).max(1).min(near);
+        let (offset, per_part) = cfg.eikonal_rows();
         let chosen: Vec<usize> = (0..rows / queries_per_part)
             .flat_map(|p| {
-                let first = p * queries_per_part + queries_per_part - near;
+                let first = p * queries_per_part + offset;
                 first..first + per_part
             })
             .collect();
@@ -1447,9 +1456,8 @@ fn batch_loss(
             let mut loss = diff.abs().mean() + reg;
             if cfg.eikonal > 0.0 {
                 // The reference form of `eikonal_term`, through burn's autodiff.
-                let near = cfg.near_queries();
-                let per_part = (near / EIKONAL_SHARE).max(1).min(near);
-                let p0 = pts.narrow(1, q - near, per_part);
+                let (offset, per_part) = cfg.eikonal_rows();
+                let p0 = pts.narrow(1, offset, per_part);
                 let f0 = model.decoder.sdf(p0.clone(), z.clone());
                 let mut g2 = f0.zeros_like();
                 for k in 0..3 {
@@ -2580,17 +2588,17 @@ mod tests {
                 draw(b * cfg.queries_per_part, -0.2, 0.2),
                 draw(b * cfg.surface_points * 3, -0.5, 0.5),
             );
+            let batch = || Batch {
+                pts: pts.clone(),
+                tgt: tgt.clone(),
+                surf: surf.clone(),
+            };
             let run = |backward: DecoderBackward| {
                 let cfg = ShapeTrainConfig {
                     decoder_backward: backward,
                     ..cfg.clone()
                 };
-                let batch = Batch {
-                    pts: pts.clone(),
-                    tgt: tgt.clone(),
-                    surf: surf.clone(),
-                };
-                let (loss, value) = batch_loss(&model, batch, &cfg, &device);
+                let (loss, value) = batch_loss(&model, batch(), &cfg, &device);
                 let grads = loss.backward();
                 macro_rules! grad {
                     ($t:expr) => {
@@ -2622,12 +2630,7 @@ mod tests {
                     eikonal: 0.0,
                     ..cfg.clone()
                 };
-                let batch = Batch {
-                    pts: pts.clone(),
-                    tgt: tgt.clone(),
-                    surf: surf.clone(),
-                };
-                let (_, without) = batch_loss(&model, batch, &plain, &device);
+                let (_, without) = batch_loss(&model, batch(), &plain, &device);
                 assert!(
                     (host_value - without).abs() > 1e-3,
                     "seed {seed}: eikonal {eikonal} left the loss at {without}"

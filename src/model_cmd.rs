@@ -29,8 +29,8 @@ use physnap::train::codebook::{
 };
 use physnap::train::diffusion::{DiffusionTrainConfig, load_data, train_diffusion};
 use physnap::train::shape::{
-    DecoderBackward, ShapeTrainConfig, encode_shape_dir, load_shape_prior, read_model_config,
-    train_shape, write_atomic,
+    DecoderBackward, ShapeTrainConfig, encode_shape_dir, load_shape_prior, model_config_of,
+    read_model_config, train_shape, write_atomic,
 };
 
 use super::{
@@ -174,7 +174,12 @@ pub fn encode(a: EncodeArgs) -> anyhow::Result<()> {
 pub fn install_shape(a: InstallShapeArgs) -> anyhow::Result<()> {
     let (mut manifest, path, installed) = manifest_with_shape_prior(&a.weights)?;
     let report_path = a.shape.join("shape_train.json");
-    let cfg = read_model_config(&report_path)?;
+    let report: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(&report_path)
+            .with_context(|| format!("reading {}", report_path.display()))?,
+    )
+    .with_context(|| format!("parsing {}", report_path.display()))?;
+    let cfg = model_config_of(&report, &report_path)?;
     if cfg != manifest.shape_prior.config {
         bail!(
             "{}: model sizes {cfg:?} differ from the installed shape prior's {:?}",
@@ -216,11 +221,6 @@ pub fn install_shape(a: InstallShapeArgs) -> anyhow::Result<()> {
     let new_bytes =
         std::fs::read(&candidate).with_context(|| format!("reading {}", candidate.display()))?;
     write_atomic(&installed, &new_bytes)?;
-    let report: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(&report_path)
-            .with_context(|| format!("reading {}", report_path.display()))?,
-    )
-    .with_context(|| format!("parsing {}", report_path.display()))?;
     manifest.shape_prior.sha256 = sha256_hex(&new_bytes);
     // The run this one continued stays on record; the metrics were measured with the old
     // decoder.

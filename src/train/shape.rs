@@ -391,8 +391,8 @@ pub fn read_model_config(report: &Path) -> Result<ShapePriorConfig, TrainError> 
     model_config_of(&v, report)
 }
 
-/// The model sizes in a parsed `shape_train.json` document; `source` names it in errors.
-fn model_config_of(v: &Value, report: &Path) -> Result<ShapePriorConfig, TrainError> {
+/// The model sizes in a parsed `shape_train.json` document; `report` names it in errors.
+pub fn model_config_of(v: &Value, report: &Path) -> Result<ShapePriorConfig, TrainError> {
     let get = |k: &str| -> Result<usize, TrainError> {
         v["config"]["model"][k]
             .as_u64()
@@ -1302,29 +1302,35 @@ fn eikonal_term(
     let h = EIKONAL_STEP;
     let mut probes = Vec::with_capacity(3 * chosen.len());
     let mut probe_idx = Vec::with_capacity(3 * chosen.len());
-    let mut at = Vec::with_capacity(4 * chosen.len());
-    let mut at_idx = Vec::with_capacity(4 * chosen.len());
     for &r in chosen {
-        at.push(q[r]);
-        at_idx.push(idx[r]);
         for k in 0..3 {
             let mut p = q[r];
             p[k] += h;
             probes.push(p);
             probe_idx.push(idx[r]);
-            at.push(p);
-            at_idx.push(idx[r]);
         }
     }
+    // One forward pass: the chosen rows, then their probes.
+    let at: Vec<[f32; 3]> = chosen
+        .iter()
+        .map(|&r| q[r])
+        .chain(probes.iter().copied())
+        .collect();
+    let at_idx: Vec<usize> = chosen
+        .iter()
+        .map(|&r| idx[r])
+        .chain(probe_idx.iter().copied())
+        .collect();
     let mut f = vec![0.0; at.len()];
     host.eval(&at, features, &at_idx, &mut f);
+    let (f_rows, f_probes) = f.split_at(chosen.len());
     let m = chosen.len().max(1) as f32;
     let mut value = 0.0f64;
     let mut probe_upstream = vec![0.0; probes.len()];
     let mut base_upstream = vec![0.0; q.len()];
     for (c, &r) in chosen.iter().enumerate() {
-        let f0 = f[4 * c];
-        let d: [f32; 3] = std::array::from_fn(|k| (f[4 * c + 1 + k] - f0) / h);
+        let f0 = f_rows[c];
+        let d: [f32; 3] = std::array::from_fn(|k| (f_probes[3 * c + k] - f0) / h);
         let g = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt().max(1e-6);
         value += (weight * (g - 1.0) * (g - 1.0) / m) as f64;
         // ∂/∂f_k of w (g − 1)² / m, with ∂g/∂f_k = d_k / (g h); f0 enters every d_k with −1.
@@ -1388,22 +1394,17 @@ fn host_decoder_surrogate(
     });
     // The eikonal term's shifted probes join the batch as extra rows; its gradient on the base
     // rows is added to theirs.
-    let (q, idx, extra_up) = match &eik {
-        Some(e) => {
-            let mut q = q.clone();
-            let mut idx = idx.clone();
-            q.extend_from_slice(&e.probes);
-            idx.extend_from_slice(&e.probe_idx);
-            (q, idx, Some(e))
-        }
-        None => (q, idx, None),
-    };
+    let (mut q, mut idx) = (q, idx);
+    if let Some(e) = &eik {
+        q.extend_from_slice(&e.probes);
+        idx.extend_from_slice(&e.probe_idx);
+    }
     let g = host.weight_grads(&q, &feature_values, &idx, &|r, f| {
         if r < rows {
             l1_upstream(f, tgt[r], cfg.truncation).1 / n
-                + extra_up.map_or(0.0, |e| e.base_upstream[r])
+                + eik.as_ref().map_or(0.0, |e| e.base_upstream[r])
         } else {
-            extra_up.map_or(0.0, |e| e.probe_upstream[r - rows])
+            eik.as_ref().map_or(0.0, |e| e.probe_upstream[r - rows])
         }
     });
     let l1 = g.values[..rows]

@@ -8,7 +8,9 @@ over 10-20 samples therefore says little on its own; this script pools every sam
 from any number of runs (deduplicated by cloud and seed) and reports, per metric:
 
   mean_A / mean_B with a 95 % percentile-bootstrap interval (resampling each side's samples,
-  10,000 draws, fixed seed), the medians, and the share of samples above 0 and above 1e-4.
+  10,000 draws, fixed seed), the medians, the share of samples above 0 and above 1e-4, and —
+  over the (cloud, seed) pairs both sides ran, e.g. two weights on the same scans and seeds —
+  on how many pairs A is lower than B.
 
 Only the standard library; reads `rows[*].per_sample` (physnap.guided_table/v1).
 
@@ -23,7 +25,7 @@ import random
 import statistics
 import sys
 
-METRICS = ["e_pc", "d_pc", "e_pen", "e_mob"]
+METRICS = ["e_pc", "d_pc", "e_pen", "e_mob", "o_mesh"]
 
 
 def load(paths, variant, aware):
@@ -91,9 +93,10 @@ def main():
     )
     print(
         f"| metric | mean {args.label_a} | mean {args.label_b} | ratio A/B [95 % CI] "
-        f"| median A / B | > 0 A / B | > 1e-4 A / B |"
+        f"| median A / B | > 0 A / B | > 1e-4 A / B | A < B (paired) |"
     )
-    print("|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|")
+    by_key = {(s["cloud"], s["seed"]): s for s in b}
     for m in METRICS:
         va = [s[m] for s in a if s.get(m) is not None]
         vb = [s[m] for s in b if s.get(m) is not None]
@@ -102,10 +105,19 @@ def main():
         ma, mb = statistics.fmean(va), statistics.fmean(vb)
         lo, hi = boot_ratio(va, vb, rng)
         ratio = ma / mb if mb > 0 else float("inf")
+        pairs = [
+            (s[m], by_key[(s["cloud"], s["seed"])][m])
+            for s in a
+            if (s["cloud"], s["seed"]) in by_key
+            and s.get(m) is not None
+            and by_key[(s["cloud"], s["seed"])].get(m) is not None
+        ]
+        lower = sum(x < y for x, y in pairs)
         print(
             f"| {m} | {ma:.3g} | {mb:.3g} | {ratio:.2f} [{lo:.2f}, {hi:.2f}] "
             f"| {statistics.median(va):.2g} / {statistics.median(vb):.2g} "
-            f"| {share(va, 0)} / {share(vb, 0)} | {share(va, 1e-4)} / {share(vb, 1e-4)} |"
+            f"| {share(va, 0)} / {share(vb, 0)} | {share(va, 1e-4)} / {share(vb, 1e-4)} "
+            f"| {lower} / {len(pairs)} |"
         )
 
 

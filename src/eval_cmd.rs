@@ -615,6 +615,7 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
     use physnap::eval::generative::{
         loo_label_accuracy, reconstruction_hits, reconstruction_neighbours,
     };
+    use physnap::eval::guided::{MESH_OVERLAP_DEPTH, MESH_OVERLAP_SAMPLES, mesh_overlap};
     use physnap::graph::{GraphTensor, ProjectOptions, node_ch, project};
     use physnap::train::shape::encode_object_parts;
     let started = Instant::now();
@@ -647,8 +648,15 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
         );
     }
     let pb = super::progress_bar(ids.len(), "objects");
-    // Per object: category, original clouds, reconstruction (clouds or why not), empty parts.
-    type Rec = (String, StateClouds, Result<StateClouds, String>, usize);
+    // Per object: category, original clouds, reconstruction (clouds or why not), empty parts,
+    // O_mesh of the original and of the reconstruction.
+    type Rec = (
+        String,
+        StateClouds,
+        Result<StateClouds, String>,
+        usize,
+        [f64; 2],
+    );
     let recs: Vec<Rec> = ids
         .iter()
         .enumerate()
@@ -713,8 +721,12 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
             // The same seed as the original: the same joint states, so the distance to it is the
             // shapes' (and the graph's) loss, not state-sampling noise.
             let rec = state_clouds(&obj, &meshes, &id, salt).map_err(|e| e.to_string());
+            // How much the parts overlap on the meshes, original and reconstruction (the
+            // representation's own share of a generated sample's O_mesh).
+            let overlap = [(&orig, &orig_meshes), (&obj, &meshes)]
+                .map(|(o, m)| mesh_overlap(o, m, MESH_OVERLAP_SAMPLES, salt));
             pb.inc(1);
-            Ok((cat, orig_clouds, rec, empty))
+            Ok((cat, orig_clouds, rec, empty, overlap))
         })
         .collect::<anyhow::Result<_>>()?;
     pb.finish_and_clear();
@@ -729,6 +741,12 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
         .collect();
     let objects_with_empty = recs.iter().filter(|r| r.3 > 0).count();
     let empty_parts: usize = recs.iter().map(|r| r.3).sum();
+    let overlap: [Vec<f64>; 2] = [0, 1].map(|k| {
+        recs.iter()
+            .map(|r| r.4[k])
+            .filter(|v| v.is_finite())
+            .collect()
+    });
 
     let pairs = rec_clouds.len() * originals.len() + originals.len() * (originals.len() - 1) / 2;
     let progress = PairProgress::new(pairs);
@@ -805,6 +823,15 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
         median(&own).unwrap_or(f64::NAN),
         median(&nearest_other).unwrap_or(f64::NAN)
     );
+    let share = |v: &[f64]| v.iter().filter(|&&x| x > 0.0).count() as f64 / v.len().max(1) as f64;
+    println!(
+        "  O_mesh (surface buried > {} mm in another part, mean over 5 joint states): originals mean {:.4} ({:.0}% > 0), reconstructions mean {:.4} ({:.0}% > 0)",
+        1000.0 * MESH_OVERLAP_DEPTH,
+        mean(&overlap[0]).unwrap_or(f64::NAN),
+        100.0 * share(&overlap[0]),
+        mean(&overlap[1]).unwrap_or(f64::NAN),
+        100.0 * share(&overlap[1]),
+    );
     for (c, h, t) in &per_cat {
         println!("    {c:<18} {h}/{t}");
     }
@@ -829,6 +856,10 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
             "self_retrieval": self_hits as f64 / total as f64,
             "id_to_original": { "mean": mean(&own), "median": median(&own) },
             "original_nearest_other_median": median(&nearest_other),
+            "o_mesh": {
+                "original": { "mean": mean(&overlap[0]), "median": median(&overlap[0]), "share": share(&overlap[0]) },
+                "reconstruction": { "mean": mean(&overlap[1]), "median": median(&overlap[1]), "share": share(&overlap[1]) },
+            },
             "categories": per_cat.iter().map(|(c, h, t)| json!({"category": c, "hits": h, "objects": t})).collect::<Vec<_>>(),
             "seconds": { "encode_mesh": mesh_s, "total": wall },
             "command": std::env::args().collect::<Vec<_>>().join(" "),

@@ -531,7 +531,7 @@ pub fn generate(a: GenerateArgs) -> anyhow::Result<()> {
             );
         }
         if let Some(opts) = &guidance {
-            let m = guided_metrics(&decoder, &g.raw, &g.meshes, &opts.points);
+            let m = guided_metrics(&decoder, &g.raw, &g.object, &g.meshes, &opts.points, g.seed);
             rows.push((name, g.seed, m));
         }
     }
@@ -628,6 +628,7 @@ fn write_ranking(
                 "e_pc": num(m.e_pc),
                 "e_pen": num(m.e_pen),
                 "e_mob": num(m.e_mob),
+                "o_mesh": num(m.o_mesh),
             })
         })
         .collect();
@@ -840,7 +841,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         let m = |i: usize| s.metrics.map(|m| num(m[i]));
         serde_json::json!({
             "cloud": s.cloud, "seed": s.seed, "seconds": s.seconds, "diverged": s.metrics.is_none(),
-            "e_pc": m(0), "d_pc": m(1), "e_pen": m(2), "e_mob": m(3),
+            "e_pc": m(0), "d_pc": m(1), "e_pen": m(2), "e_mob": m(3), "o_mesh": m(4),
         })
     };
     let json = serde_json::json!({
@@ -868,6 +869,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
             "e_pc": num(r.e_pc), "d_pc": num(r.d_pc), "e_pen": num(r.e_pen), "e_mob": num(r.e_mob),
             "e_pen_mean": num(r.e_pen_mean), "e_mob_mean": num(r.e_mob_mean),
             "pen_share": num(r.pen_share), "mob_share": num(r.mob_share),
+            "o_mesh_mean": num(r.o_mesh_mean), "o_mesh_share": num(r.o_mesh_share),
             "mmd": num(r.mmd), "one_nna": num(r.one_nna),
             "samples": r.samples, "diverged": r.diverged, "seconds_per_sample": r.seconds_per_sample,
             "per_sample": r.per_sample.iter().map(sample_json).collect::<Vec<_>>(),

@@ -7,7 +7,15 @@
 //! E_pen = ℓ_pen over S without existence weights           (V_el incl. 10⁵, ordered pairs)
 //! E_mob = mean over 5 states k/4 (synchronised γ, d) of the ℓ_mob sweep over the object's tree
 //!         joints (MST of §5.4, class by argmax), without edge weights, factor 2 kept
+//! O_mesh = mean over the same 5 states of  Σ_i A_i · #{p ∈ X_i : ∃ j ≠ i, p inside M_j deeper
+//!          than δ} / |X_i|  /  Σ_i A_i          (X_i: area-weighted samples of part mesh M_i,
+//!          A_i its area, δ = 5 mm; physnap's addition, see below)
 //! ```
+//!
+//! E_pen and E_mob integrate the decoder's own field, so they are in its units: a decoder whose
+//! field is twice as steep reports about four times the overlap for the same meshes. O_mesh
+//! measures the same failure on the extracted meshes — the share of the parts' surface buried
+//! inside another part, at rest and while the joints move — so it compares across decoders.
 //!
 //! [`guided_table`] runs the paper's Table 1 (category-aware no/yes × pc+pen+mob, pc+pen, pc+mob,
 //! pc, uncond; medians over all samples; diverged samples counted, not measured). MMD and 1-NNA
@@ -36,6 +44,7 @@ use crate::model::codebook::Codebook;
 use crate::model::denoiser::Denoiser;
 use crate::model::shape_prior::LatentSdfDecoder;
 
+use crate::data::rng::Rng;
 use crate::engine::guidance::field::part_sdf;
 use crate::engine::guidance::grid::ints;
 use crate::engine::guidance::{SdfField, decode, mob, pen};
@@ -47,6 +56,8 @@ use crate::graph::project::{existing_slots, spanning_tree};
 use crate::graph::{EDGE_DIM, GraphTensor, K, NODE_DIM, NUM_EDGES, edge_ch, edge_index};
 use crate::mesh::TriMesh;
 use crate::mesh::bvh::MeshBvh;
+use crate::object::ArticulatedObject;
+use nalgebra::Point3;
 
 /// Existence threshold of the metrics.
 pub const EXIST_THRESHOLD: f32 = 0.5;
@@ -62,7 +73,17 @@ pub struct GuidedMetrics {
     pub e_pen: f64,
     /// E_mob.
     pub e_mob: f64,
+    /// O_mesh (NaN when no part mesh has area).
+    pub o_mesh: f64,
 }
+
+/// Depth δ (metres) beyond which a surface sample inside another part's mesh counts in O_mesh:
+/// parts that merely touch (a door closed against its frame) stay below it despite meshing
+/// error.
+pub const MESH_OVERLAP_DEPTH: f32 = 0.005;
+
+/// Area-weighted surface samples per part mesh in O_mesh.
+pub const MESH_OVERLAP_SAMPLES: usize = 256;
 
 /// E_pc, E_pen and E_mob of a raw (unscaled) graph; D_pc needs meshes ([`d_pc`]).
 pub fn sdf_metrics(field: &dyn SdfField, raw: &GraphTensor, points: &[[f32; 3]]) -> GuidedMetrics {
@@ -121,8 +142,95 @@ pub fn sdf_metrics(field: &dyn SdfField, raw: &GraphTensor, points: &[[f32; 3]])
         d_pc: f64::NAN,
         e_pen,
         e_mob,
+        o_mesh: f64::NAN,
     }
 }
+
+/// O_mesh of `obj` with one mesh per part (object frame at rest): the share of the parts'
+/// surface area lying more than [`MESH_OVERLAP_DEPTH`] inside another part's mesh, mean over
+/// the joint states k/4, k = 0..4, every joint at the same fraction of its range. Sampling is
+/// seeded; NaN when the meshes do not match the parts or none has area.
+pub fn mesh_overlap(
+    obj: &ArticulatedObject,
+    meshes: &[TriMesh],
+    samples_per_part: usize,
+    seed: u64,
+) -> f64 {
+    if meshes.len() != obj.parts.len() || samples_per_part == 0 {
+        return f64::NAN;
+    }
+    let bvhs: Vec<Option<MeshBvh>> = meshes
+        .iter()
+        .map(|m| {
+            if m.triangles.is_empty() {
+                None
+            } else {
+                MeshBvh::new(&m.positions, &m.triangles).ok()
+            }
+        })
+        .collect();
+    let bounds: Vec<Option<([f32; 3], [f32; 3])>> = meshes.iter().map(TriMesh::bounds).collect();
+    let mut rng = Rng::new(seed);
+    let mut uniform = || rng.uniform();
+    let samples: Vec<Vec<[f32; 3]>> = bvhs
+        .iter()
+        .map(|b| {
+            b.as_ref().map_or_else(Vec::new, |b| {
+                b.sample_surface(samples_per_part, &mut uniform)
+                    .into_iter()
+                    .map(|(p, _)| p)
+                    .collect()
+            })
+        })
+        .collect();
+    let areas: Vec<f64> = bvhs
+        .iter()
+        .map(|b| b.as_ref().map_or(0.0, MeshBvh::total_area))
+        .collect();
+    let total: f64 = areas.iter().sum();
+    if !(total > 0.0) {
+        return f64::NAN;
+    }
+    let depth = MESH_OVERLAP_DEPTH;
+    let inside_bounds = |p: &Point3<f64>, b: &([f32; 3], [f32; 3])| {
+        (0..3).all(|k| p[k] > (b.0[k] + depth) as f64 && p[k] < (b.1[k] - depth) as f64)
+    };
+    let mut share = 0.0;
+    for k in 0..OVERLAP_STATES {
+        let f = k as f64 / (OVERLAP_STATES - 1) as f64;
+        let motions = obj.part_motions(&obj.states_at(f));
+        let inverse: Vec<_> = motions.iter().map(|m| m.inverse()).collect();
+        let mut buried = 0.0;
+        for (i, pts) in samples.iter().enumerate() {
+            let hits = pts
+                .iter()
+                .filter(|p| {
+                    let world = motions[i] * Point3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+                    (0..meshes.len()).any(|j| {
+                        let (Some(bvh), Some(b)) = (&bvhs[j], &bounds[j]) else {
+                            return false;
+                        };
+                        let q = inverse[j] * world;
+                        if j == i || !inside_bounds(&q, b) {
+                            return false;
+                        }
+                        let q = [q.x as f32, q.y as f32, q.z as f32];
+                        bvh.is_inside(q)
+                            && bvh
+                                .closest_point(q)
+                                .is_some_and(|(_, d2, _)| d2 > depth * depth)
+                    })
+                })
+                .count();
+            buried += areas[i] * hits as f64 / pts.len().max(1) as f64;
+        }
+        share += buried / total;
+    }
+    share / OVERLAP_STATES as f64
+}
+
+/// Joint states of O_mesh (k/4, k = 0..4, as E_mob's metric states).
+const OVERLAP_STATES: usize = 5;
 
 /// D_pc: mean distance from `points` to the union of `meshes` (object frame at rest); NaN when
 /// there are no triangles or no points.
@@ -150,15 +258,19 @@ pub fn d_pc(meshes: &[TriMesh], points: &[[f32; 3]]) -> f64 {
     sum / points.len() as f64
 }
 
-/// All four metrics of a generated sample.
+/// Every metric of a generated sample (`obj` and `meshes` as generation returns them; O_mesh
+/// sampled with `seed`).
 pub fn metrics(
     field: &dyn SdfField,
     raw: &GraphTensor,
+    obj: &ArticulatedObject,
     meshes: &[TriMesh],
     points: &[[f32; 3]],
+    seed: u64,
 ) -> GuidedMetrics {
     GuidedMetrics {
         d_pc: d_pc(meshes, points),
+        o_mesh: mesh_overlap(obj, meshes, MESH_OVERLAP_SAMPLES, seed),
         ..sdf_metrics(field, raw, points)
     }
 }
@@ -303,6 +415,10 @@ pub struct TableRow {
     pub pen_share: f64,
     /// Share of samples with E_mob > 0 (parts colliding when moved).
     pub mob_share: f64,
+    /// Mean O_mesh (share of the parts' surface buried in another part, on the meshes).
+    pub o_mesh_mean: f64,
+    /// Share of samples with O_mesh > 0.
+    pub o_mesh_share: f64,
     /// Median over clouds of the per-cloud MMD (NaN without references).
     pub mmd: f64,
     /// Median over clouds of the per-cloud 1-NNA (NaN without references).
@@ -324,8 +440,8 @@ pub struct SampleRecord {
     pub cloud: String,
     /// The sample's seed.
     pub seed: u64,
-    /// (E_pc, D_pc, E_pen, E_mob); None when the sample diverged.
-    pub metrics: Option<[f64; 4]>,
+    /// (E_pc, D_pc, E_pen, E_mob, O_mesh); None when the sample diverged.
+    pub metrics: Option<[f64; 5]>,
     /// Wall time of this sample (s), sampling + meshing + metrics.
     pub seconds: f64,
 }
@@ -588,7 +704,7 @@ pub fn run_rows(
         let aware = spec.category_aware;
         {
             let started = std::time::Instant::now();
-            let mut values: [Vec<f64>; 4] = Default::default();
+            let mut values: [Vec<f64>; 5] = Default::default();
             let mut per_cloud: [Vec<f64>; 2] = Default::default();
             let mut diverged = 0;
             let mut per_sample = Vec::new();
@@ -641,15 +757,22 @@ pub fn run_rows(
                     }) {
                         Ok(out) => {
                             let g = &out[0];
-                            let m = metrics(decoder, &g.raw, &g.meshes, &cloud.points);
-                            let four = [m.e_pc, m.d_pc, m.e_pen, m.e_mob];
-                            for (slot, v) in values.iter_mut().zip(four) {
+                            let m = metrics(
+                                decoder,
+                                &g.raw,
+                                &g.object,
+                                &g.meshes,
+                                &cloud.points,
+                                g.seed,
+                            );
+                            let all = [m.e_pc, m.d_pc, m.e_pen, m.e_mob, m.o_mesh];
+                            for (slot, v) in values.iter_mut().zip(all) {
                                 slot.push(v);
                             }
                             per_sample.push(SampleRecord {
                                 cloud: cloud.id.clone(),
                                 seed,
-                                metrics: Some(four),
+                                metrics: Some(all),
                                 seconds: sample_started.elapsed().as_secs_f64(),
                             });
                             // A sample without any mesh triangles has no surface to compare;
@@ -692,6 +815,8 @@ pub fn run_rows(
                 e_mob_mean: mean(&values[3]),
                 pen_share: positive_share(&values[2]),
                 mob_share: positive_share(&values[3]),
+                o_mesh_mean: mean(&values[4]),
+                o_mesh_share: positive_share(&values[4]),
                 mmd: median(&per_cloud[0]),
                 one_nna: median(&per_cloud[1]),
                 samples: n,
@@ -747,15 +872,15 @@ pub fn positive_share(values: &[f64]) -> f64 {
 }
 
 /// The table as Markdown in the paper's layout ("—" where a metric could not be computed),
-/// followed by physnap's extra columns: means of E_pen / E_mob and the share of samples in
-/// which they are non-zero.
+/// followed by physnap's extra columns: means of E_pen / E_mob / O_mesh and the share of
+/// samples in which they are non-zero.
 pub fn table_markdown(rows: &[TableRow]) -> String {
     let mut s = String::from(
-        "| category | variant | E_pc | D_pc | E_pen | E_mob | MMD | 1-NNA | samples | diverged | s/sample | E_pen mean | E_mob mean | E_pen > 0 | E_mob > 0 |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| category | variant | E_pc | D_pc | E_pen | E_mob | MMD | 1-NNA | samples | diverged | s/sample | E_pen mean | E_mob mean | E_pen > 0 | E_mob > 0 | O_mesh mean | O_mesh > 0 |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         s.push_str(&format!(
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {} | {} | {} | {} |\n",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {} | {} | {} | {} | {} | {} |\n",
             if r.category_aware { "yes" } else { "no" },
             r.variant,
             cell(r.e_pc),
@@ -771,6 +896,8 @@ pub fn table_markdown(rows: &[TableRow]) -> String {
             cell(r.e_mob_mean),
             percent(r.pen_share),
             percent(r.mob_share),
+            cell(r.o_mesh_mean),
+            percent(r.o_mesh_share),
         ));
     }
     s
@@ -864,6 +991,78 @@ mod tests {
     }
 
     #[test]
+    fn mesh_overlap_measures_buried_surface_at_rest_and_in_motion() {
+        use crate::object::{Joint, JointKind, Part};
+        use crate::shape::PartShape;
+        use nalgebra::Vector3;
+        let meshes_of = |obj: &ArticulatedObject| -> Vec<TriMesh> {
+            obj.parts
+                .iter()
+                .map(|p| primitives::part_primitive_mesh(p).expect("primitive part"))
+                .collect()
+        };
+        // Two unit cubes, the second 0.3 deep in the first, sliding out along x by 0.6 over
+        // its range. At f = 0 and 1/4 one face of each lies inside the other (area 0.99² each
+        // beyond δ = 5 mm of the shared side faces) out of 12; at f = 1/2 they touch; then
+        // apart. Mean over the 5 states: 2 · 2 · 0.99² / 12 / 5.
+        let cube = |name: &str, x: f64| Part {
+            name: name.into(),
+            half_extents: Vector3::new(0.5, 0.5, 0.5),
+            center: Vector3::new(x, 0.0, 0.0),
+            shape: PartShape::Box,
+        };
+        let slide = ArticulatedObject {
+            name: "cubes".into(),
+            category: None,
+            parts: vec![cube("a", 0.0), cube("b", 0.7)],
+            joints: vec![Joint {
+                parent: 0,
+                child: 1,
+                kind: JointKind::Prismatic,
+                axis: Vector3::x(),
+                origin: nalgebra::Point3::origin(),
+                revolute: [0.0, 0.0],
+                prismatic: [0.0, 0.6],
+            }],
+        };
+        slide.validate().unwrap();
+        let expected = 4.0 * 0.99f64.powi(2) / 12.0 / 5.0;
+        let o = mesh_overlap(&slide, &meshes_of(&slide), 4096, 3);
+        assert!((o - expected).abs() < 0.01, "O_mesh {o} vs {expected}");
+        // Seeded: the same call gives the same value.
+        assert_eq!(o, mesh_overlap(&slide, &meshes_of(&slide), 4096, 3));
+        // The example cabinet never interpenetrates, at rest or moving.
+        let cabinet = crate::fixtures::cabinet();
+        assert_eq!(mesh_overlap(&cabinet, &meshes_of(&cabinet), 512, 1), 0.0);
+        // Its door swinging inwards instead hits the back panel, though it is clear at rest.
+        let mut inward = cabinet.clone();
+        let door = inward.joints.iter_mut().find(|j| j.child == 1).unwrap();
+        door.revolute = [-1.9, 0.0];
+        let o = mesh_overlap(&inward, &meshes_of(&inward), 512, 1);
+        assert!(o > 0.0, "inward door: O_mesh {o}");
+        let rest_only = ArticulatedObject {
+            joints: inward
+                .joints
+                .iter()
+                .map(|j| Joint {
+                    revolute: [0.0, 0.0],
+                    prismatic: [0.0, 0.0],
+                    ..j.clone()
+                })
+                .collect(),
+            ..inward.clone()
+        };
+        assert_eq!(
+            mesh_overlap(&rest_only, &meshes_of(&rest_only), 512, 1),
+            0.0
+        );
+        // Meshes that do not match the parts, or no area at all: no value.
+        assert!(mesh_overlap(&slide, &meshes_of(&slide)[..1], 64, 0).is_nan());
+        let empty = vec![TriMesh::default(), TriMesh::default()];
+        assert!(mesh_overlap(&slide, &empty, 64, 0).is_nan());
+    }
+
+    #[test]
     fn the_table_has_the_paper_layout_and_counts_every_sample() {
         use crate::model::denoiser::DenoiserConfig;
         use crate::model::shape_prior::{ShapeDecoder, ShapePriorConfig};
@@ -949,12 +1148,18 @@ mod tests {
             assert_eq!(s.metrics.is_none(), r.diverged == 1);
             if let Some(m) = s.metrics {
                 assert_eq!(m[0], r.e_pc, "a single sample is its own median");
+                // O_mesh is on record and is the row's mean (NaN only without mesh area).
+                assert!(
+                    m[4] == r.o_mesh_mean || (m[4].is_nan() && r.o_mesh_mean.is_nan()),
+                    "{r:?}"
+                );
             }
         }
         let md = table_markdown(&rows);
         assert_eq!(md.lines().count(), 12);
         assert!(md.contains("| yes | pc+pen+mob |"), "{md}");
-        assert!(md.lines().all(|l| l.matches('|').count() == 16), "{md}");
+        assert!(md.lines().all(|l| l.matches('|').count() == 18), "{md}");
+        assert!(md.contains("| O_mesh mean | O_mesh > 0 |"), "{md}");
         // A cloud without a category: the category-aware block is left out.
         let anon = vec![Cloud {
             category: None,

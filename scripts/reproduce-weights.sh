@@ -7,21 +7,22 @@
 # shipped denoiser was trained: 2,000 steps at a constant learning rate, then --resume with a
 # cosine decay and a weight EMA to 7,000 steps; the denoiser adds its category to every graph
 # layer, --category-layers) -> retrieval codebook (written by train diffusion) -> eval generative
-# -> (only with DECODER_STEPS > 0, not in the shipped recipe) a second cosine cycle of the
-# shape prior's decoder with its encoder frozen (train shape --init-from OUT/weights
-# --freeze-encoder at lr 5e-4), installed with train install-shape (the codes, and so the
+# -> a second cosine cycle of the shape prior's decoder with its encoder frozen and an eikonal
+# term (train shape --init-from OUT/weights --freeze-encoder --eikonal 0.01 at lr 5e-4; the
+# shipped weights since 2026-11-27), installed with train install-shape (the codes, and so the
 # denoiser, stay valid) -> eval shape and eval generative --write-manifest. OUT/weights is then
 # a drop-in replacement for weights/.
-# About 2 h 10 min on 2 idle cores (BENCHMARKS.md "Training the shipped weights"); a
-# 3,000-step decoder cycle adds about 27 min.
+# About 2 h 45 min on 2 idle cores (BENCHMARKS.md "Training the shipped weights"), of which
+# the decoder cycle is about 33 min (DECODER_STEPS=0 skips it: the recipe before 2026-11-27).
 #
 # Knobs (environment; the defaults are the shipped recipe, smaller values make a smoke run):
 #   PHYSNAP_BIN   physnap binary (default: cargo build --release, then target/release/physnap)
 #   OBJECTS (3000)  SHAPE_STEPS (3000)  STAGE1 (2000)  STAGE2 (0: no stop between; N: a third run
 #   resumed at N, as the weights shipped before 2026-11-26 were made)  STEPS (7000)
 #   BATCH_OBJECTS (16)  CHECKPOINT_EVERY (500)  IMPORT_FLAGS ("")  SHAPE_FLAGS ("")
-#   DENOISER_FLAGS ("")  DECODER_STEPS (0: none, as shipped; 3000: shape IoU 0.555 -> 0.621,
-#   guided scan alignment worse, EVALUATION.md)  DECODER_FLAGS ("")
+#   DENOISER_FLAGS ("")  DECODER_STEPS (3000, as shipped; 0: no decoder cycle)
+#   DECODER_FLAGS ("--eikonal 0.01", as shipped; set it empty for the plain cycle, which raises
+#   the shape IoU more, 0.621 against 0.588, but aligns guided fits worse, EVALUATION.md)
 #   EVAL (1: run eval generative; 0: skip)
 set -euo pipefail
 
@@ -36,8 +37,8 @@ CHECKPOINT_EVERY=${CHECKPOINT_EVERY:-500}
 IMPORT_FLAGS=${IMPORT_FLAGS:-}
 SHAPE_FLAGS=${SHAPE_FLAGS:-}
 DENOISER_FLAGS=${DENOISER_FLAGS:-}
-DECODER_STEPS=${DECODER_STEPS:-0}
-DECODER_FLAGS=${DECODER_FLAGS:-}
+DECODER_STEPS=${DECODER_STEPS:-3000}
+DECODER_FLAGS=${DECODER_FLAGS-"--eikonal 0.01"}
 EVAL=${EVAL:-1}
 
 if [ -z "${PHYSNAP_BIN:-}" ]; then
@@ -86,8 +87,9 @@ fi
 run train diffusion "${common[@]}" "${decay[@]}" $DENOISER_FLAGS
 if [ "$DECODER_STEPS" != 0 ]; then
   # The decoder limits the shape IoU most (EVALUATION.md); a second cycle with the encoder
-  # frozen improves it while every code, and so the denoiser just trained, stays valid (but
-  # guided scan completion aligns worse with it, so the shipped recipe leaves it off).
+  # frozen improves it while every code, and so the denoiser just trained, stays valid. The
+  # eikonal term keeps the decoder's field steep where guidance moves the codes: without it
+  # guided scan completion aligns worse.
   # shellcheck disable=SC2086
   run train shape --data "$OUT/train" --out "$OUT/shape_decoder" --steps "$DECODER_STEPS" \
     --seed 0 --init-from "$OUT/weights" --freeze-encoder --lr 5e-4 $SHAPE_FLAGS $DECODER_FLAGS

@@ -585,6 +585,10 @@ fn synth_import_train_generate() {
         rc["id_to_original"]["mean"].as_f64().unwrap() > 0.0,
         "{rc:#}"
     );
+    let overlap = rc["o_mesh"]["reconstruction"]["mean"]
+        .as_f64()
+        .unwrap_or(-1.0);
+    assert!((0.0..=1.0).contains(&overlap), "{rc:#}");
     // The control: the originals' meshes on the projected graphs. The graph representation
     // loses nothing, so every reconstruction is at distance ≈ 0 from its original and the
     // category accuracy is the originals' own leave-one-out figure.
@@ -598,6 +602,10 @@ fn synth_import_train_generate() {
         "{rc:#}"
     );
     assert_eq!(rc["self_retrieval"], 1.0, "{rc:#}");
+    // Generated data passes the validity check, so no part is buried in another on the
+    // original meshes, and neither on the same meshes placed by the projected graph.
+    assert_eq!(rc["o_mesh"]["original"]["mean"], 0.0, "{rc:#}");
+    assert_eq!(rc["o_mesh"]["reconstruction"]["mean"], 0.0, "{rc:#}");
     assert_eq!(
         rc["category_accuracy"], rc["original_loo_accuracy"],
         "{rc:#}"
@@ -831,6 +839,8 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         "{m:#}"
     );
     assert_eq!(m["training"]["shape_base"]["steps"], 4, "{m:#}");
+    // With the eikonal term, as the shipped decoder was trained.
+    assert_eq!(m["training"]["shape"]["config"]["eikonal"], 0.01, "{m:#}");
     // Bad stage order is refused before anything runs.
     let o = Command::new("bash")
         .arg(concat!(

@@ -188,7 +188,7 @@ pub fn mesh_overlap(
         .map(|b| b.as_ref().map_or(0.0, MeshBvh::total_area))
         .collect();
     let total: f64 = areas.iter().sum();
-    if !(total > 0.0) {
+    if total.is_nan() || total <= 0.0 {
         return f64::NAN;
     }
     let depth = MESH_OVERLAP_DEPTH;

@@ -844,6 +844,11 @@ async fn guided_ddim_job_streams_losses_and_ranks_best_of_n() {
     assert_eq!(rows.len(), 2, "{ranking:#}");
     let d: Vec<f64> = rows.iter().map(|r| r["d_pc"].as_f64().unwrap()).collect();
     assert!(d[0] <= d[1], "{ranking:#}");
+    // Every finished sample reports how much of its surface is buried in another part.
+    for r in rows {
+        let o = r["o_mesh"].as_f64().unwrap_or(-1.0);
+        assert!((0.0..=1.0).contains(&o), "{ranking:#}");
+    }
     assert_eq!(rows[0]["exported"], true);
     assert_eq!(rows[0]["diverged"], false);
     assert_eq!(rows[0]["retrieved_parts"], json!([]));

@@ -16,8 +16,8 @@
 //! ([`EngineError::Diverged`]) is recorded and skipped, and the others are ranked by D_pc
 //! (mean point-to-mesh distance to the job's cloud, ascending; samples without a mesh last).
 //! The best is exported as `model.glb`, `robot.zip` and `object.json`; `ranking.json`
-//! (`physnap.job_ranking/v1`) lists every sample with index, seed, D_pc, whether it diverged
-//! (and why) and which one was exported. If every sample diverges the job fails with
+//! (`physnap.job_ranking/v1`) lists every sample with index, seed, D_pc, O_mesh (surface
+//! buried in another part), whether it diverged (and why) and which one was exported. If every sample diverges the job fails with
 //! [`RunError::AllDiverged`].
 
 use std::ops::ControlFlow;
@@ -28,7 +28,7 @@ use crate::engine::generate::{GenerateRequest, Generated, PartShapes, generate_w
 use crate::engine::guidance::{GuidanceLosses, GuidanceOptions, SdfField};
 use crate::engine::sample::step_events;
 use crate::engine::schedule::Schedule;
-use crate::eval::guided::d_pc;
+use crate::eval::guided::{MESH_OVERLAP_SAMPLES, d_pc, mesh_overlap};
 use crate::export::{ExportError, ExportOptions, glb, urdf, zip_bundle};
 use crate::graph::{ProjectOptions, project};
 use crate::io::manifest::LoadedModels;
@@ -216,6 +216,8 @@ struct Ranked {
     index: usize,
     seed: u64,
     d_pc: f64,
+    /// O_mesh: share of the part surface buried in another part (NaN when diverged).
+    o_mesh: f64,
     diverged: Option<String>,
     /// Parts that took their nearest codebook shape.
     retrieved: Vec<usize>,
@@ -250,6 +252,7 @@ fn ranking_json(spec: &JobSpec, guidance: &Option<GuidanceOptions>, rows: &[Rank
             "index": r.index,
             "seed": r.seed,
             "d_pc": num(r.d_pc),
+            "o_mesh": num(r.o_mesh),
             "diverged": r.diverged.is_some(),
             "retrieved_parts": r.retrieved,
             "error": r.diverged,
@@ -395,6 +398,7 @@ pub fn run_job(
             index: g.index,
             seed: g.seed,
             d_pc: *d,
+            o_mesh: mesh_overlap(&g.object, &g.meshes, MESH_OVERLAP_SAMPLES, g.seed),
             diverged: None,
             retrieved: g.retrieved.clone(),
         })
@@ -403,6 +407,7 @@ pub fn run_job(
         index,
         seed,
         d_pc: f64::NAN,
+        o_mesh: f64::NAN,
         diverged: Some(e),
         retrieved: Vec::new(),
     }));

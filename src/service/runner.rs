@@ -17,8 +17,8 @@
 //! (mean point-to-mesh distance to the job's cloud, ascending; samples without a mesh last).
 //! The best is exported as `model.glb`, `robot.zip` and `object.json`; `ranking.json`
 //! (`physnap.job_ranking/v1`) lists every sample with index, seed, D_pc, O_mesh (surface
-//! buried in another part), whether it diverged (and why) and which one was exported. If every sample diverges the job fails with
-//! [`RunError::AllDiverged`].
+//! buried in another part), whether it diverged (and why) and which one was exported. If
+//! every sample diverges the job fails with [`RunError::AllDiverged`].
 
 use std::ops::ControlFlow;
 use std::time::Instant;

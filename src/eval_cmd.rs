@@ -615,7 +615,9 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
     use physnap::eval::generative::{
         loo_label_accuracy, reconstruction_hits, reconstruction_neighbours,
     };
-    use physnap::eval::guided::{MESH_OVERLAP_DEPTH, MESH_OVERLAP_SAMPLES, mesh_overlap};
+    use physnap::eval::guided::{
+        MESH_OVERLAP_DEPTH, MESH_OVERLAP_SAMPLES, mesh_overlap, positive_share as share,
+    };
     use physnap::graph::{GraphTensor, ProjectOptions, node_ch, project};
     use physnap::train::shape::encode_object_parts;
     let started = Instant::now();
@@ -823,7 +825,6 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
         median(&own).unwrap_or(f64::NAN),
         median(&nearest_other).unwrap_or(f64::NAN)
     );
-    let share = |v: &[f64]| v.iter().filter(|&&x| x > 0.0).count() as f64 / v.len().max(1) as f64;
     println!(
         "  O_mesh (surface buried > {} mm in another part, mean over 5 joint states): originals mean {:.4} ({:.0}% > 0), reconstructions mean {:.4} ({:.0}% > 0)",
         1000.0 * MESH_OVERLAP_DEPTH,

@@ -1371,8 +1371,8 @@ fn host_decoder_surrogate(
     let host = HostDecoder::new(decoder);
     let hidden = host.feature_width();
     let feature_values = to_vec(features.clone().detach());
-    let q: Vec<[f32; 3]> = pts.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
-    let idx: Vec<usize> = (0..q.len()).map(|r| r / queries_per_part).collect();
+    let mut q: Vec<[f32; 3]> = pts.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
+    let mut idx: Vec<usize> = (0..q.len()).map(|r| r / queries_per_part).collect();
     let n = q.len() as f32;
     let rows = q.len();
     let eik = (cfg.eikonal > 0.0).then(|| {
@@ -1394,7 +1394,6 @@ fn host_decoder_surrogate(
     });
     // The eikonal term's shifted probes join the batch as extra rows; its gradient on the base
     // rows is added to theirs.
-    let (mut q, mut idx) = (q, idx);
     if let Some(e) = &eik {
         q.extend_from_slice(&e.probes);
         idx.extend_from_slice(&e.probe_idx);

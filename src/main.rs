@@ -604,6 +604,15 @@ struct EvalGuidedArgs {
     /// Category-aware blocks: no, yes, or both (both when the weights are category-conditional).
     #[arg(long, env = "PHYSNAP_CATEGORY_AWARE", default_value = "both", value_parser = ["no", "yes", "both"])]
     category_aware: String,
+    /// Multipliers of the paper's weights of ℓ_pc, ℓ_pen and ℓ_mob in every guided row
+    /// (PC,PEN,MOB; each in [0, 100]), e.g. 1,2,1 for a doubled ℓ_pen on the same scans and seeds.
+    #[arg(
+        long,
+        env = "PHYSNAP_LOSS_SCALES",
+        value_delimiter = ',',
+        default_value = "1,1,1"
+    )]
+    loss_scales: Vec<f64>,
     /// Run a hyper-parameter sweep of the supplementary material instead of Table 1: pc, pen or
     /// mob (that loss alone over --sweep-ng × --sweep-weights) or tau (ℓ_pc alone over
     /// --sweep-tau); each block starts with the unguided baseline. Writes sweep_<kind>.md/json.

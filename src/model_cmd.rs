@@ -733,6 +733,11 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
     if sweep.is_some() && !a.variants.is_empty() {
         bail!("invalid --variants with --sweep: a sweep chooses its own rows (drop one of them)");
     }
+    if sweep.is_some() && a.loss_scales != [1.0; 3] {
+        bail!(
+            "invalid --loss-scales with --sweep: a sweep chooses its own weights (drop one of them)"
+        );
+    }
     let device = physnap::model::cpu();
     let models = load_models(&a.weights, &device)?;
     let clouds = read_clouds(&a.clouds, a.max_clouds)?;
@@ -753,6 +758,13 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         variants: a.variants.clone(),
         guided_steps: a.sampling.guidance_steps,
         tau: a.sampling.tau,
+        loss_scales: match a.loss_scales.as_slice() {
+            &[pc, pen, mob] => [pc, pen, mob],
+            other => bail!(
+                "invalid --loss-scales: {} values (must be three: PC,PEN,MOB)",
+                other.len()
+            ),
+        },
         max_step: super::max_step(a.sampling.guidance_max_step),
         refine_steps: a.sampling.guidance_refine_steps,
         sampler: sampler(&a.sampling.sampler, a.sampling.eta),
@@ -851,6 +863,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         "command": std::env::args().collect::<Vec<_>>().join(" "),
         "seed": a.seed, "guidance_steps": a.sampling.guidance_steps, "tau": a.sampling.tau,
         "guidance_max_step": opts.max_step, "guidance_refine_steps": opts.refine_steps,
+        "loss_scales": opts.loss_scales,
         "sampler": a.sampling.sampler, "steps": a.sampling.steps, "eta": a.sampling.eta,
         "category_guidance": a.sampling.category.category_guidance,
         "category_guidance_below": a.sampling.category.category_guidance_below,

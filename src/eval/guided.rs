@@ -361,6 +361,10 @@ pub struct TableOptions {
     pub guided_steps: usize,
     /// τ.
     pub tau: f64,
+    /// Multipliers of the paper's weights of ℓ_pc, ℓ_pen and ℓ_mob in every guided row
+    /// ([1, 1, 1]: the paper's table). Lets one table measure, say, a doubled ℓ_pen against the
+    /// same scans and seeds.
+    pub loss_scales: [f64; 3],
     /// Optional clamp of the guidance gradient (a deviation; see `GuidanceOptions::max_step`).
     pub max_step: Option<f64>,
     /// Refinement steps after sampling (see `GuidanceOptions::refine_steps`).
@@ -484,6 +488,18 @@ pub fn table_rows(opts: &TableOptions) -> Result<Vec<RowSpec>, EngineError> {
             value: unknown.clone(),
         });
     }
+    if let Some((name, v)) = ["pc", "pen", "mob"]
+        .into_iter()
+        .zip(opts.loss_scales)
+        .find(|(_, v)| !(v.is_finite() && (0.0..=100.0).contains(v)))
+    {
+        return Err(EngineError::Invalid {
+            field: format!("loss_scales.{name}"),
+            limit: "finite, in [0, 100]".into(),
+            value: v.to_string(),
+        });
+    }
+    let [s_pc, s_pen, s_mob] = opts.loss_scales;
     let specs: Vec<RowSpec> = opts
         .category_aware
         .iter()
@@ -491,9 +507,15 @@ pub fn table_rows(opts: &TableOptions) -> Result<Vec<RowSpec>, EngineError> {
             variants.iter().map(move |v| RowSpec {
                 category_aware: aware,
                 label: v.name.to_string(),
-                guidance: v
-                    .terms
-                    .map(|t| GuidanceSetting::paper(t, opts.guided_steps, opts.tau)),
+                guidance: v.terms.map(|t| {
+                    let p = GuidanceSetting::paper(t, opts.guided_steps, opts.tau);
+                    GuidanceSetting {
+                        w_pc: p.w_pc * s_pc,
+                        w_pen: p.w_pen * s_pen,
+                        w_mob: p.w_mob * s_mob,
+                        ..p
+                    }
+                }),
             })
         })
         .collect();
@@ -1102,6 +1124,7 @@ mod tests {
             variants: Vec::new(),
             guided_steps: 1000,
             tau: 1000.0,
+            loss_scales: [1.0; 3],
             max_step: Some(0.05),
             refine_steps: 0,
             sampler: Sampler::Ddim { eta: 0.0 },
@@ -1214,6 +1237,32 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(err.contains("variants") && err.contains("pc+penn"), "{err}");
+        // Loss scales multiply the paper's weights of every guided row; a bad one is refused
+        // naming the term, the limit and the value.
+        let scaled = TableOptions {
+            loss_scales: [1.0, 3.0, 0.5],
+            ..opts.clone()
+        };
+        let specs = table_rows(&scaled).unwrap();
+        let full = specs.iter().find(|s| s.label == "pc+pen+mob").unwrap();
+        let g = full.guidance.unwrap();
+        assert_eq!((g.w_pc, g.w_pen, g.w_mob), (15.0, 2.0, 1.0 / 3.0));
+        let pc = specs.iter().find(|s| s.label == "pc").unwrap();
+        assert_eq!(pc.guidance.unwrap().w_pc, 45.0);
+        assert!(
+            specs.iter().any(|s| s.guidance.is_none()),
+            "uncond stays unguided"
+        );
+        let err = table_rows(&TableOptions {
+            loss_scales: [1.0, -2.0, 1.0],
+            ..opts.clone()
+        })
+        .unwrap_err()
+        .to_string();
+        assert!(
+            err.contains("loss_scales.pen") && err.contains("[0, 100]") && err.contains("-2"),
+            "{err}"
+        );
 
         // A sweep: the baseline plus every (n_g, weight) point, each run with its own guidance.
         let specs = sweep_rows(

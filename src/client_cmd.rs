@@ -53,10 +53,11 @@ pub struct SubmitArgs {
     /// Point-cloud loss weight (server default: 45 ÷ active terms; all weights 0 = unguided).
     #[arg(long, env = "PHYSNAP_W_PC")]
     w_pc: Option<f64>,
-    /// Penetration loss weight (server default: 2 ÷ active terms; 0 turns it off).
+    /// Penetration loss weight (server default: 3 × the paper's 2 ÷ active terms; 0 turns it
+    /// off).
     #[arg(long, env = "PHYSNAP_W_PEN")]
     w_pen: Option<f64>,
-    /// Mobility loss weight (server default: 2 ÷ active terms; 0 turns it off).
+    /// Mobility loss weight (server default: 3 × the paper's 2 ÷ active terms; 0 turns it off).
     #[arg(long, env = "PHYSNAP_W_MOB")]
     w_mob: Option<f64>,
     /// n_g: how many of the final reverse steps are guided (server default: 500 of 1000,
@@ -67,7 +68,7 @@ pub struct SubmitArgs {
     #[arg(long, env = "PHYSNAP_TAU")]
     tau: Option<f64>,
     /// Clamp each guidance-gradient entry to ±this (a deviation from the paper; server default
-    /// 0.05, 0 = off).
+    /// 0.02, 0 = off).
     #[arg(long, env = "PHYSNAP_GUIDANCE_MAX_STEP")]
     guidance_max_step: Option<f64>,
     /// Refinement steps on the guidance loss of the finished sample (physnap, not in the

@@ -486,10 +486,12 @@ struct GenerateArgs {
     /// Weight of the point-cloud loss (default with --points: 45 ÷ active terms).
     #[arg(long, env = "PHYSNAP_W_PC")]
     w_pc: Option<f64>,
-    /// Weight of the penetration loss (default with --points: 2 ÷ active terms; 0 turns it off).
+    /// Weight of the penetration loss (default with --points: physnap's 3 × the paper's 2 ÷
+    /// active terms, 2 for pc+pen+mob; 0 turns it off).
     #[arg(long, env = "PHYSNAP_W_PEN")]
     w_pen: Option<f64>,
-    /// Weight of the mobility loss (default with --points: 2 ÷ active terms; 0 turns it off).
+    /// Weight of the mobility loss (default with --points: physnap's 3 × the paper's 2 ÷ active
+    /// terms, 2 for pc+pen+mob; 0 turns it off).
     #[arg(long, env = "PHYSNAP_W_MOB")]
     w_mob: Option<f64>,
     /// Sampler and guidance schedule.
@@ -605,14 +607,10 @@ struct EvalGuidedArgs {
     #[arg(long, env = "PHYSNAP_CATEGORY_AWARE", default_value = "both", value_parser = ["no", "yes", "both"])]
     category_aware: String,
     /// Multipliers of the paper's weights of ℓ_pc, ℓ_pen and ℓ_mob in every guided row
-    /// (PC,PEN,MOB; each in [0, 100]), e.g. 1,2,1 for a doubled ℓ_pen on the same scans and seeds.
-    #[arg(
-        long,
-        env = "PHYSNAP_LOSS_SCALES",
-        value_delimiter = ',',
-        default_value = "1,1,1"
-    )]
-    loss_scales: Vec<f64>,
+    /// (PC,PEN,MOB; each in [0, 100]). Default: physnap's, 1,3,3 (what `generate` and the
+    /// service run); 1,1,1 is the paper's table.
+    #[arg(long, env = "PHYSNAP_LOSS_SCALES", value_delimiter = ',')]
+    loss_scales: Option<Vec<f64>>,
     /// Run a hyper-parameter sweep of the supplementary material instead of Table 1: pc, pen or
     /// mob (that loss alone over --sweep-ng × --sweep-weights) or tau (ℓ_pc alone over
     /// --sweep-tau); each block starts with the unguided baseline. Writes sweep_<kind>.md/json.

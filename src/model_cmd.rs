@@ -575,16 +575,16 @@ fn guidance_options(a: &GenerateArgs) -> anyhow::Result<Option<GuidanceOptions>>
         pen: a.w_pen.is_none_or(|w| w > 0.0),
         mob: a.w_mob.is_none_or(|w| w > 0.0),
     };
-    let paper = GuidanceOptions::paper(points, terms);
+    let defaults = GuidanceOptions::defaults(points, terms);
     let opts = GuidanceOptions {
-        w_pc: a.w_pc.unwrap_or(paper.w_pc),
-        w_pen: a.w_pen.unwrap_or(paper.w_pen),
-        w_mob: a.w_mob.unwrap_or(paper.w_mob),
+        w_pc: a.w_pc.unwrap_or(defaults.w_pc),
+        w_pen: a.w_pen.unwrap_or(defaults.w_pen),
+        w_mob: a.w_mob.unwrap_or(defaults.w_mob),
         steps: a.sampling.guidance_steps,
         tau: a.sampling.tau,
         max_step: super::max_step(a.sampling.guidance_max_step),
         refine_steps: a.sampling.guidance_refine_steps,
-        ..paper
+        ..defaults
     };
     opts.validate(Schedule::default().len())?;
     Ok(Some(opts))
@@ -733,7 +733,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
     if sweep.is_some() && !a.variants.is_empty() {
         bail!("invalid --variants with --sweep: a sweep chooses its own rows (drop one of them)");
     }
-    if sweep.is_some() && a.loss_scales != [1.0; 3] {
+    if sweep.is_some() && a.loss_scales.is_some() {
         bail!(
             "invalid --loss-scales with --sweep: a sweep chooses its own weights (drop one of them)"
         );
@@ -758,9 +758,10 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         variants: a.variants.clone(),
         guided_steps: a.sampling.guidance_steps,
         tau: a.sampling.tau,
-        loss_scales: match a.loss_scales.as_slice() {
-            &[pc, pen, mob] => [pc, pen, mob],
-            other => bail!(
+        loss_scales: match a.loss_scales.as_deref() {
+            None => physnap::engine::guidance::DEFAULT_LOSS_SCALES,
+            Some(&[pc, pen, mob]) => [pc, pen, mob],
+            Some(other) => bail!(
                 "invalid --loss-scales: {} values (must be three: PC,PEN,MOB)",
                 other.len()
             ),

@@ -772,11 +772,10 @@ async fn guided_ddim_job_streams_losses_and_ranks_best_of_n() {
     assert_eq!(req["category_guidance_below"].as_u64(), Some(1000), "{req}");
     // The default joint motion: one per joint.
     assert_eq!(req["joint_motion"], "dominant", "{req}");
-    // Unset weights follow the paper's rule: w_pen = w_mob = 2 / 3.
-    assert!(
-        (req["w_pen"].as_f64().unwrap() - 2.0 / 3.0).abs() < 1e-12,
-        "{req}"
-    );
+    // Unset weights follow physnap's rule: the paper's 2 ÷ 3 terms, × 3 for ℓ_pen and ℓ_mob.
+    assert!((req["w_pen"].as_f64().unwrap() - 2.0).abs() < 1e-12, "{req}");
+    assert!((req["w_mob"].as_f64().unwrap() - 2.0).abs() < 1e-12, "{req}");
+    assert!((req["w_pc"].as_f64().unwrap() - 15.0).abs() < 1e-12, "{req}");
 
     let r = c.get(s.url(&format!("{loc}/events"))).send().await.unwrap();
     let evs = SseReader::new(r).collect().await;

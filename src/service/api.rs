@@ -42,10 +42,12 @@ pub struct JobRequest {
     /// Point-cloud loss weight ℓ_pc (>= 0). Default: the paper's 45 ÷ active terms (15).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub w_pc: Option<f64>,
-    /// Penetration loss weight ℓ_pen (>= 0). Default: 2 ÷ active terms (2/3); 0 turns it off.
+    /// Penetration loss weight ℓ_pen (>= 0). Default: physnap's 3 × the paper's 2 ÷ active terms
+    /// (2 with all three terms); 0 turns it off.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub w_pen: Option<f64>,
-    /// Mobility loss weight ℓ_mob (>= 0). Default: 2 ÷ active terms (2/3); 0 turns it off.
+    /// Mobility loss weight ℓ_mob (>= 0). Default: physnap's 3 × the paper's 2 ÷ active terms
+    /// (2 with all three terms); 0 turns it off.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub w_mob: Option<f64>,
     /// n_g: how many of the final reverse steps are guided (<= steps). Default: the paper's 500
@@ -56,7 +58,7 @@ pub struct JobRequest {
     /// 1000).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tau: Option<f64>,
-    /// Clamp each guidance-gradient entry to ±this (model space; finite, >= 0; default 0.05).
+    /// Clamp each guidance-gradient entry to ±this (model space; finite, >= 0; default 0.02).
     /// A deviation from the paper's raw gradient, which diverges with the shipped weights;
     /// 0 = off (the paper's raw step).
     #[serde(default, skip_serializing_if = "Option::is_none")]

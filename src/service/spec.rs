@@ -397,17 +397,18 @@ pub fn validate(
             Some((idx, caps.categories[idx].clone()))
         }
     };
-    // Paper defaults (45/2/2 ÷ active terms) for the terms not switched off with a 0, the
-    // same rule as `physnap generate --points`; given weights override.
+    // physnap's defaults (the paper's 45/2/2 ÷ active terms, ℓ_pen and ℓ_mob × 3) for the terms
+    // not switched off with a 0, the same rule as `physnap generate --points`; given weights
+    // override.
     let terms = Terms {
         pc: input.w_pc.is_none_or(|w| w > 0.0),
         pen: input.w_pen.is_none_or(|w| w > 0.0),
         mob: input.w_mob.is_none_or(|w| w > 0.0),
     };
-    let paper = GuidanceOptions::paper(Vec::new(), terms);
-    let w_pc = weight("w_pc", input.w_pc.or(Some(paper.w_pc)), limits)?;
-    let w_pen = weight("w_pen", input.w_pen.or(Some(paper.w_pen)), limits)?;
-    let w_mob = weight("w_mob", input.w_mob.or(Some(paper.w_mob)), limits)?;
+    let defaults = GuidanceOptions::defaults(Vec::new(), terms);
+    let w_pc = weight("w_pc", input.w_pc.or(Some(defaults.w_pc)), limits)?;
+    let w_pen = weight("w_pen", input.w_pen.or(Some(defaults.w_pen)), limits)?;
+    let w_mob = weight("w_mob", input.w_mob.or(Some(defaults.w_mob)), limits)?;
     let sampler = input
         .sampler
         .clone()
@@ -714,7 +715,7 @@ mod tests {
         assert_eq!(s.engine_sampler(), Sampler::Ddim { eta: 0.0 });
         assert_eq!(s.guidance_max_step, Some(DEFAULT_MAX_STEP));
         assert_eq!(s.refine_steps, 10);
-        assert_eq!((s.w_pc, s.w_pen, s.w_mob), (15.0, 2.0 / 3.0, 2.0 / 3.0));
+        assert_eq!((s.w_pc, s.w_pen, s.w_mob), (15.0, 2.0, 2.0));
         assert!(s.guided());
         // Exactly the last 100 of the 200 strided times are guided, as with the CLI's
         // `--guidance-steps 500` (t < 500).
@@ -821,13 +822,14 @@ mod tests {
 
     #[test]
     fn weight_defaults_follow_the_papers_rule_for_the_active_terms() {
+        // The paper's base ÷ active terms (45/2 and 2/2 here), ℓ_mob × 3 (physnap's default).
         let input = JobInput {
             points: Some(cloud(16)),
             w_pen: Some(0.0),
             ..Default::default()
         };
         let s = validate(&input, &caps(), &Limits::default(), 0).unwrap();
-        assert_eq!((s.w_pc, s.w_pen, s.w_mob), (22.5, 0.0, 1.0));
+        assert_eq!((s.w_pc, s.w_pen, s.w_mob), (22.5, 0.0, 3.0));
         let input = JobInput {
             points: Some(cloud(16)),
             w_pc: Some(0.0),

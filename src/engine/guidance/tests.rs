@@ -437,9 +437,17 @@ fn options_follow_the_paper_and_bad_values_name_field_limit_value() {
     );
     assert_eq!((pc_pen.w_pc, pc_pen.w_pen, pc_pen.w_mob), (22.5, 1.0, 0.0));
     assert_eq!((all.steps, all.tau), (500, 1000.0));
+    // physnap's defaults: the same terms with ℓ_pen and ℓ_mob at 3× the paper's weight.
+    let ours = GuidanceOptions::defaults(vec![[0.0; 3]], Terms::ALL);
+    assert_eq!((ours.w_pc, ours.w_pen, ours.w_mob), (15.0, 2.0, 2.0));
+    assert_eq!(GuidanceOptions::default().w_pen, 2.0);
+    assert_eq!(
+        (ours.steps, ours.tau, ours.max_step),
+        (500, 1000.0, Some(0.02))
+    );
     assert!(all.validate(1000).is_ok());
     assert_eq!(all.refine_steps, 0, "the paper's settings do not refine");
-    assert!((all.refine_max_step().unwrap() - 0.005).abs() < 1e-12);
+    assert!((all.refine_max_step().unwrap() - 0.002).abs() < 1e-12);
     // Each bad field is refused with a message naming the field, the value and the limit.
     let cases: [(GuidanceOptions, &[&str]); 6] = [
         (

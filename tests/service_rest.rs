@@ -773,9 +773,10 @@ async fn guided_ddim_job_streams_losses_and_ranks_best_of_n() {
     // The default joint motion: one per joint.
     assert_eq!(req["joint_motion"], "dominant", "{req}");
     // Unset weights follow physnap's rule: the paper's 2 ÷ 3 terms, × 3 for ℓ_pen and ℓ_mob.
-    assert!((req["w_pen"].as_f64().unwrap() - 2.0).abs() < 1e-12, "{req}");
-    assert!((req["w_mob"].as_f64().unwrap() - 2.0).abs() < 1e-12, "{req}");
-    assert!((req["w_pc"].as_f64().unwrap() - 15.0).abs() < 1e-12, "{req}");
+    for (key, want) in [("w_pc", 15.0), ("w_pen", 2.0), ("w_mob", 2.0)] {
+        let got = req[key].as_f64().unwrap();
+        assert!((got - want).abs() < 1e-12, "{key}: {req}");
+    }
 
     let r = c.get(s.url(&format!("{loc}/events"))).send().await.unwrap();
     let evs = SseReader::new(r).collect().await;

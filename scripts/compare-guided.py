@@ -105,13 +105,11 @@ def main():
         ma, mb = statistics.fmean(va), statistics.fmean(vb)
         lo, hi = boot_ratio(va, vb, rng)
         ratio = ma / mb if mb > 0 else float("inf")
-        pairs = [
-            (s[m], by_key[(s["cloud"], s["seed"])][m])
-            for s in a
-            if (s["cloud"], s["seed"]) in by_key
-            and s.get(m) is not None
-            and by_key[(s["cloud"], s["seed"])].get(m) is not None
-        ]
+        pairs = []
+        for s in a:
+            t = by_key.get((s["cloud"], s["seed"]))
+            if t is not None and s.get(m) is not None and t.get(m) is not None:
+                pairs.append((s[m], t[m]))
         lower = sum(x < y for x, y in pairs)
         print(
             f"| {m} | {ma:.3g} | {mb:.3g} | {ratio:.2f} [{lo:.2f}, {hi:.2f}] "

@@ -499,7 +499,6 @@ pub fn table_rows(opts: &TableOptions) -> Result<Vec<RowSpec>, EngineError> {
             value: v.to_string(),
         });
     }
-    let [s_pc, s_pen, s_mob] = opts.loss_scales;
     let specs: Vec<RowSpec> = opts
         .category_aware
         .iter()
@@ -508,13 +507,7 @@ pub fn table_rows(opts: &TableOptions) -> Result<Vec<RowSpec>, EngineError> {
                 category_aware: aware,
                 label: v.name.to_string(),
                 guidance: v.terms.map(|t| {
-                    let p = GuidanceSetting::paper(t, opts.guided_steps, opts.tau);
-                    GuidanceSetting {
-                        w_pc: p.w_pc * s_pc,
-                        w_pen: p.w_pen * s_pen,
-                        w_mob: p.w_mob * s_mob,
-                        ..p
-                    }
+                    GuidanceSetting::scaled(t, opts.loss_scales, opts.guided_steps, opts.tau)
                 }),
             })
         })
@@ -540,7 +533,13 @@ pub struct GuidanceSetting {
 impl GuidanceSetting {
     /// The paper's weights for `terms` (base ÷ active terms).
     pub fn paper(terms: Terms, steps: usize, tau: f64) -> Self {
-        let p = GuidanceOptions::paper(Vec::new(), terms);
+        GuidanceSetting::scaled(terms, [1.0; 3], steps, tau)
+    }
+
+    /// The paper's weights for `terms` times `scales` (w_pc, w_pen, w_mob), see
+    /// [`GuidanceOptions::with_loss_scales`].
+    pub fn scaled(terms: Terms, scales: [f64; 3], steps: usize, tau: f64) -> Self {
+        let p = GuidanceOptions::paper(Vec::new(), terms).with_loss_scales(scales);
         GuidanceSetting {
             w_pc: p.w_pc,
             w_pen: p.w_pen,

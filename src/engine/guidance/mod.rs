@@ -148,13 +148,17 @@ impl GuidanceOptions {
     /// physnap's defaults for `terms`, what the CLI and the service run when a weight is not
     /// given: the paper's weights times [`DEFAULT_LOSS_SCALES`], with the default clamp.
     pub fn defaults(points: Vec<[f32; 3]>, terms: Terms) -> Self {
-        let p = GuidanceOptions::paper(points, terms);
-        let [pc, pen, mob] = DEFAULT_LOSS_SCALES;
+        GuidanceOptions::paper(points, terms).with_loss_scales(DEFAULT_LOSS_SCALES)
+    }
+
+    /// The same guidance with w_pc, w_pen and w_mob multiplied by `scales` (in that order).
+    pub fn with_loss_scales(self, scales: [f64; 3]) -> Self {
+        let [pc, pen, mob] = scales;
         GuidanceOptions {
-            w_pc: p.w_pc * pc,
-            w_pen: p.w_pen * pen,
-            w_mob: p.w_mob * mob,
-            ..p
+            w_pc: self.w_pc * pc,
+            w_pen: self.w_pen * pen,
+            w_mob: self.w_mob * mob,
+            ..self
         }
     }
 

@@ -6,14 +6,16 @@
 # data synth -> data import -> train shape -> train diffusion (two runs, exactly how the
 # shipped denoiser was trained: 2,000 steps at a constant learning rate, then --resume with a
 # cosine decay and a weight EMA to 7,000 steps; the denoiser adds its category to every graph
-# layer, --category-layers) -> retrieval codebook (written by train diffusion) -> eval generative
-# -> a second cosine cycle of the shape prior's decoder with its encoder frozen and an eikonal
-# term (train shape --init-from OUT/weights --freeze-encoder --eikonal 0.01 at lr 5e-4; the
-# shipped weights since 2026-11-27), installed with train install-shape (the codes, and so the
-# denoiser, stay valid) -> eval shape and eval generative --write-manifest. OUT/weights is then
-# a drop-in replacement for weights/.
-# About 2 h 45 min on 2 idle cores (BENCHMARKS.md "Training the shipped weights"), of which
-# the decoder cycle is about 33 min (DECODER_STEPS=0 skips it: the recipe before 2026-11-27).
+# layer, --category-layers) -> retrieval codebook (written by train diffusion) -> two more
+# cosine cycles of the shape prior's decoder with its encoder frozen and an eikonal term
+# (train shape --init-from OUT/weights --freeze-encoder --eikonal 0.01 at lr 5e-4, seeds 0
+# and 1; the shipped decoder since 2026-11-27), each installed with train install-shape (the
+# codes, and so the denoiser, stay valid) -> eval shape and eval generative --write-manifest.
+# OUT/weights is then a drop-in replacement for weights/.
+# About 2 h 45 min on 2 idle cores with the evaluations, 2 h 32 min without (BENCHMARKS.md
+# "Training the shipped weights"), of which each decoder cycle is about 27 min
+# (DECODER_CYCLES=1: the recipe of the first 2026-11-27 weights; DECODER_STEPS=0 or
+# DECODER_CYCLES=0: no cycle, the recipe before 2026-11-27).
 #
 # Knobs (environment; the defaults are the shipped recipe, smaller values make a smoke run):
 #   PHYSNAP_BIN   physnap binary (default: cargo build --release, then target/release/physnap)
@@ -21,6 +23,7 @@
 #   resumed at N, as the weights shipped before 2026-11-26 were made)  STEPS (7000)
 #   BATCH_OBJECTS (16)  CHECKPOINT_EVERY (500)  IMPORT_FLAGS ("")  SHAPE_FLAGS ("")
 #   DENOISER_FLAGS ("")  DECODER_STEPS (3000, as shipped; 0: no decoder cycle)
+#   DECODER_CYCLES (2, as shipped; 0: none)
 #   DECODER_FLAGS ("--eikonal 0.01", as shipped; set it empty for the plain cycle, which raises
 #   the shape IoU more, 0.621 against 0.588, but aligns guided fits worse, EVALUATION.md)
 #   EVAL (1: run eval generative; 0: skip)
@@ -39,8 +42,13 @@ SHAPE_FLAGS=${SHAPE_FLAGS:-}
 DENOISER_FLAGS=${DENOISER_FLAGS:-}
 DECODER_STEPS=${DECODER_STEPS:-3000}
 DECODER_FLAGS=${DECODER_FLAGS-"--eikonal 0.01"}
+DECODER_CYCLES=${DECODER_CYCLES:-2}
 EVAL=${EVAL:-1}
 
+if ! [[ "$DECODER_CYCLES" =~ ^[0-9]+$ ]]; then
+  echo "invalid DECODER_CYCLES: need a whole number of decoder cycles (0 for none), got '$DECODER_CYCLES'" >&2
+  exit 2
+fi
 if [ -z "${PHYSNAP_BIN:-}" ]; then
   cargo build --release --locked
   PHYSNAP_BIN=target/release/physnap
@@ -86,14 +94,18 @@ fi
 # shellcheck disable=SC2086
 run train diffusion "${common[@]}" "${decay[@]}" $DENOISER_FLAGS
 if [ "$DECODER_STEPS" != 0 ]; then
-  # The decoder limits the shape IoU most (EVALUATION.md); a second cycle with the encoder
-  # frozen improves it while every code, and so the denoiser just trained, stays valid. The
+  # The decoder limits the shape IoU most (EVALUATION.md); further cycles with the encoder
+  # frozen improve it while every code, and so the denoiser just trained, stays valid. The
   # eikonal term keeps the decoder's field steep where guidance moves the codes: without it
-  # guided scan completion aligns worse.
-  # shellcheck disable=SC2086
-  run train shape --data "$OUT/train" --out "$OUT/shape_decoder" --steps "$DECODER_STEPS" \
-    --seed 0 --init-from "$OUT/weights" --freeze-encoder --lr 5e-4 $SHAPE_FLAGS $DECODER_FLAGS
-  run train install-shape --shape "$OUT/shape_decoder" --weights "$OUT/weights"
+  # guided scan completion aligns worse. Cycle i uses seed i - 1 (its query draws) and starts
+  # from the decoder the previous cycle installed.
+  for ((cycle = 1; cycle <= DECODER_CYCLES; cycle++)); do
+    # shellcheck disable=SC2086
+    run train shape --data "$OUT/train" --out "$OUT/shape_decoder$cycle" --steps "$DECODER_STEPS" \
+      --seed $((cycle - 1)) --init-from "$OUT/weights" --freeze-encoder --lr 5e-4 $SHAPE_FLAGS \
+      $DECODER_FLAGS
+    run train install-shape --shape "$OUT/shape_decoder$cycle" --weights "$OUT/weights"
+  done
 fi
 if [ "$EVAL" = 1 ]; then
   run eval shape --weights "$OUT/weights" --data "$OUT/train" --parts 64 --write-manifest

@@ -222,10 +222,21 @@ pub fn install_shape(a: InstallShapeArgs) -> anyhow::Result<()> {
         std::fs::read(&candidate).with_context(|| format!("reading {}", candidate.display()))?;
     write_atomic(&installed, &new_bytes)?;
     manifest.shape_prior.sha256 = sha256_hex(&new_bytes);
-    // The run this one continued stays on record; the metrics were measured with the old
-    // decoder.
-    manifest.training["shape_base"] = manifest.training["shape"].take();
-    manifest.training["shape"] = report;
+    // Every run this one continued stays on record: `shape_base` is the prior trained from
+    // scratch (its encoder made the codes), `shape_cycles` the decoder cycles installed since,
+    // oldest first. The metrics were measured with the old decoder.
+    let previous = std::mem::replace(&mut manifest.training["shape"], report);
+    if manifest.training["shape_base"].is_null() {
+        manifest.training["shape_base"] = previous;
+    } else {
+        let cycles = &mut manifest.training["shape_cycles"];
+        if !cycles.is_array() {
+            *cycles = serde_json::Value::Array(Vec::new());
+        }
+        if let Some(list) = cycles.as_array_mut() {
+            list.push(previous);
+        }
+    }
     manifest.metrics = serde_json::Value::Null;
     std::fs::write(&path, manifest_to_string(&manifest))
         .with_context(|| format!("writing {}", path.display()))?;

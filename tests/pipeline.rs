@@ -725,6 +725,8 @@ fn synth_import_train_generate() {
     assert!(m["metrics"].is_null(), "{m:#}");
     assert_eq!(m["training"]["shape"]["config"]["freeze_encoder"], true);
     assert_eq!(m["training"]["shape_base"]["steps"], 6);
+    // The first cycle installed: no earlier cycle to list.
+    assert!(m["training"]["shape_cycles"].is_null(), "{m:#}");
     let gen_ft = root.path().join("gen_ft");
     ok(&[
         "generate",
@@ -832,13 +834,27 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     );
     // The recipe's denoiser adds its category to every graph layer, as the shipped one does.
     assert_eq!(m["denoiser"]["config"]["category_layers"], true, "{m:#}");
-    // Then the decoder's second cycle, encoder frozen, is installed over the first prior.
-    assert!(err.contains("+ physnap train install-shape"), "{err}");
+    // Then two decoder cycles, encoder frozen, are installed over the first prior, each
+    // continuing the last; the manifest keeps the whole lineage.
+    assert_eq!(
+        err.matches("+ physnap train install-shape").count(),
+        2,
+        "{err}"
+    );
     assert_eq!(
         m["training"]["shape"]["config"]["freeze_encoder"], true,
         "{m:#}"
     );
+    assert_eq!(m["training"]["shape"]["config"]["seed"], 1, "{m:#}");
     assert_eq!(m["training"]["shape_base"]["steps"], 4, "{m:#}");
+    assert_eq!(
+        m["training"]["shape_base"]["config"]["freeze_encoder"], false,
+        "{m:#}"
+    );
+    let cycles = m["training"]["shape_cycles"].as_array().unwrap();
+    assert_eq!(cycles.len(), 1, "{m:#}");
+    assert_eq!(cycles[0]["config"]["seed"], 0, "{m:#}");
+    assert_eq!(cycles[0]["config"]["freeze_encoder"], true, "{m:#}");
     // With the eikonal term, as the shipped decoder was trained.
     assert_eq!(m["training"]["shape"]["config"]["eikonal"], 0.01, "{m:#}");
     // Bad stage order is refused before anything runs.
@@ -855,6 +871,20 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         .unwrap();
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("STAGE1 < STAGE2 < STEPS"));
+    assert!(!root.path().join("bad").exists());
+    let o = Command::new("bash")
+        .arg(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/scripts/reproduce-weights.sh"
+        ))
+        .arg(root.path().join("bad"))
+        .env("PHYSNAP_BIN", env!("CARGO_BIN_EXE_physnap"))
+        .env("DECODER_CYCLES", "two")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("DECODER_CYCLES") && e.contains("'two'"), "{e}");
     assert!(!root.path().join("bad").exists());
 
     // STAGE2=0: two denoiser runs, the second resuming at STAGE1 and running to STEPS.

@@ -12,7 +12,7 @@
 # and 1; the shipped decoder since 2026-11-27), each installed with train install-shape (the
 # codes, and so the denoiser, stay valid) -> eval shape and eval generative --write-manifest.
 # OUT/weights is then a drop-in replacement for weights/.
-# About 2 h 45 min on 2 idle cores with the evaluations, 2 h 32 min without (BENCHMARKS.md
+# About 2 h 40–48 min on 2 idle cores with the evaluations, 2 h 28–36 min without (BENCHMARKS.md
 # "Training the shipped weights"), of which each decoder cycle is about 27 min
 # (DECODER_CYCLES=1: the recipe of the first 2026-11-27 weights; DECODER_STEPS=0 or
 # DECODER_CYCLES=0: no cycle, the recipe before 2026-11-27).

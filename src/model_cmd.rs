@@ -10,7 +10,7 @@ use physnap::engine::EngineError;
 use physnap::engine::generate::{
     GenerateRequest, JointMotion, PartShapes, Retrieval, generate_with as run_generate,
 };
-use physnap::engine::guidance::{GuidanceOptions, SdfField, Terms};
+use physnap::engine::guidance::{GuidanceOptions, SdfField};
 use physnap::engine::sample::Sampler;
 use physnap::engine::schedule::Schedule;
 use physnap::eval::guided::metrics as guided_metrics;
@@ -229,12 +229,9 @@ pub fn install_shape(a: InstallShapeArgs) -> anyhow::Result<()> {
     if manifest.training["shape_base"].is_null() {
         manifest.training["shape_base"] = previous;
     } else {
-        let cycles = &mut manifest.training["shape_cycles"];
-        if !cycles.is_array() {
-            *cycles = serde_json::Value::Array(Vec::new());
-        }
-        if let Some(list) = cycles.as_array_mut() {
-            list.push(previous);
+        match &mut manifest.training["shape_cycles"] {
+            serde_json::Value::Array(cycles) => cycles.push(previous),
+            slot => *slot = serde_json::Value::Array(vec![previous]),
         }
     }
     manifest.metrics = serde_json::Value::Null;
@@ -581,21 +578,17 @@ fn guidance_options(a: &GenerateArgs) -> anyhow::Result<Option<GuidanceOptions>>
     if points.is_empty() && a.w_pen.is_none() && a.w_mob.is_none() {
         return Ok(None);
     }
-    let terms = Terms {
-        pc: !points.is_empty() && a.w_pc.is_none_or(|w| w > 0.0),
-        pen: a.w_pen.is_none_or(|w| w > 0.0),
-        mob: a.w_mob.is_none_or(|w| w > 0.0),
-    };
-    let defaults = GuidanceOptions::defaults(points, terms);
+    let [w_pc, w_pen, w_mob] =
+        GuidanceOptions::weights_or_defaults([a.w_pc, a.w_pen, a.w_mob], !points.is_empty());
     let opts = GuidanceOptions {
-        w_pc: a.w_pc.unwrap_or(defaults.w_pc),
-        w_pen: a.w_pen.unwrap_or(defaults.w_pen),
-        w_mob: a.w_mob.unwrap_or(defaults.w_mob),
+        points,
+        w_pc,
+        w_pen,
+        w_mob,
         steps: a.sampling.guidance_steps,
         tau: a.sampling.tau,
         max_step: super::max_step(a.sampling.guidance_max_step),
         refine_steps: a.sampling.guidance_refine_steps,
-        ..defaults
     };
     opts.validate(Schedule::default().len())?;
     Ok(Some(opts))

@@ -11,7 +11,7 @@ use crate::data::categories::category_index;
 use crate::engine::generate::{JointMotion, Retrieval};
 use crate::engine::guidance::{
     DEFAULT_GUIDED_STEPS, DEFAULT_MAX_STEP, DEFAULT_REFINE_STEPS, DEFAULT_TAU, GuidanceOptions,
-    MAX_REFINE_STEPS, Terms,
+    MAX_REFINE_STEPS,
 };
 use crate::engine::sample::Sampler;
 use crate::engine::sample::{
@@ -281,8 +281,7 @@ fn cloud_violation(e: PointCloudError, limits: &Limits) -> Violation {
     }
 }
 
-fn weight(field: &str, v: Option<f64>, limits: &Limits) -> Result<f64, Violation> {
-    let v = v.unwrap_or(0.0);
+fn weight(field: &str, v: f64, limits: &Limits) -> Result<f64, Violation> {
     if !v.is_finite() || v < 0.0 || v > limits.max_weight {
         return Err(violation(
             field,
@@ -398,17 +397,13 @@ pub fn validate(
         }
     };
     // physnap's defaults (the paper's 45/2/2 ÷ active terms, ℓ_pen and ℓ_mob × 3) for the terms
-    // not switched off with a 0, the same rule as `physnap generate --points`; given weights
-    // override.
-    let terms = Terms {
-        pc: input.w_pc.is_none_or(|w| w > 0.0),
-        pen: input.w_pen.is_none_or(|w| w > 0.0),
-        mob: input.w_mob.is_none_or(|w| w > 0.0),
-    };
-    let defaults = GuidanceOptions::defaults(Vec::new(), terms);
-    let w_pc = weight("w_pc", input.w_pc.or(Some(defaults.w_pc)), limits)?;
-    let w_pen = weight("w_pen", input.w_pen.or(Some(defaults.w_pen)), limits)?;
-    let w_mob = weight("w_mob", input.w_mob.or(Some(defaults.w_mob)), limits)?;
+    // not switched off with a 0; given weights override. The rule lives in the engine, shared
+    // with `physnap generate --points`.
+    let [w_pc, w_pen, w_mob] =
+        GuidanceOptions::weights_or_defaults([input.w_pc, input.w_pen, input.w_mob], true);
+    let w_pc = weight("w_pc", w_pc, limits)?;
+    let w_pen = weight("w_pen", w_pen, limits)?;
+    let w_mob = weight("w_mob", w_mob, limits)?;
     let sampler = input
         .sampler
         .clone()

@@ -151,6 +151,26 @@ impl GuidanceOptions {
         GuidanceOptions::paper(points, terms).with_loss_scales(DEFAULT_LOSS_SCALES)
     }
 
+    /// The weights (w_pc, w_pen, w_mob) a request runs with, the one rule of `physnap generate`
+    /// and the service: a given weight as given; an unset one physnap's default for the active
+    /// terms, where a term is active unless its weight is given as ≤ 0 (ℓ_pc also needs
+    /// points: `has_points`).
+    pub fn weights_or_defaults(given: [Option<f64>; 3], has_points: bool) -> [f64; 3] {
+        let on = |w: Option<f64>| w.is_none_or(|w| w > 0.0);
+        let [pc, pen, mob] = given;
+        let terms = Terms {
+            pc: has_points && on(pc),
+            pen: on(pen),
+            mob: on(mob),
+        };
+        let d = GuidanceOptions::defaults(Vec::new(), terms);
+        [
+            pc.unwrap_or(d.w_pc),
+            pen.unwrap_or(d.w_pen),
+            mob.unwrap_or(d.w_mob),
+        ]
+    }
+
     /// The same guidance with w_pc, w_pen and w_mob multiplied by `scales` (in that order).
     pub fn with_loss_scales(self, scales: [f64; 3]) -> Self {
         let [pc, pen, mob] = scales;

@@ -778,8 +778,9 @@ fn synth_import_train_generate() {
 fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     let root = tempfile::tempdir().unwrap();
     let out = root.path().join("repro");
-    // The script at toy scale into `out`, with `stages` = (STAGE1, STAGE2, STEPS).
-    let repro = |out: &Path, stages: [&str; 3]| -> Output {
+    // The script at toy scale into `out`, with `stages` = (STAGE1, STAGE2, STEPS) and any
+    // further knobs in `extra`.
+    let repro = |out: &Path, stages: [&str; 3], extra: &[(&str, &str)]| -> Output {
         Command::new("bash")
             .arg(concat!(
                 env!("CARGO_MANIFEST_DIR"),
@@ -800,10 +801,11 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             .env("DENOISER_FLAGS", "--width 32 --layers 1")
             .env("DECODER_STEPS", "2")
             .env("EVAL", "0")
+            .envs(extra.iter().copied())
             .output()
             .unwrap()
     };
-    let o = repro(&out, ["2", "3", "5"]);
+    let o = repro(&out, ["2", "3", "5"], &[]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     // The three stages ran in order: stage 2 stopped at 3, stage 3 resumed there.
@@ -851,6 +853,11 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         m["training"]["shape_base"]["config"]["freeze_encoder"], false,
         "{m:#}"
     );
+    // The first prior's decoder gradients come from burn's autodiff by default, as shipped.
+    assert_eq!(
+        m["training"]["shape_base"]["config"]["decoder_backward"], "burn",
+        "{m:#}"
+    );
     let cycles = m["training"]["shape_cycles"].as_array().unwrap();
     assert_eq!(cycles.len(), 1, "{m:#}");
     assert_eq!(cycles[0]["config"]["seed"], 0, "{m:#}");
@@ -865,6 +872,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             "STAGE1 < STAGE2 < STEPS",
         ),
         (&[("DECODER_CYCLES", "two")][..], "DECODER_CYCLES"),
+        (&[("SHAPE_BACKWARD", "fast")][..], "SHAPE_BACKWARD"),
     ] {
         let o = Command::new("bash")
             .arg(concat!(
@@ -883,9 +891,10 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         assert!(!bad.exists());
     }
 
-    // STAGE2=0: two denoiser runs, the second resuming at STAGE1 and running to STEPS.
+    // STAGE2=0: two denoiser runs, the second resuming at STAGE1 and running to STEPS; the
+    // first prior with the host backward pass (SHAPE_BACKWARD=host).
     let two = root.path().join("two");
-    let o = repro(&two, ["2", "0", "4"]);
+    let o = repro(&two, ["2", "0", "4"], &[("SHAPE_BACKWARD", "host")]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     assert_eq!(err.matches("+ physnap train diffusion").count(), 2, "{err}");
@@ -894,5 +903,10 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         (&summary["completed"], &summary["resumed_from"]),
         (&serde_json::json!(4), &serde_json::json!(2)),
         "{summary:#}"
+    );
+    let m = read(&two.join("weights/manifest.json"));
+    assert_eq!(
+        m["training"]["shape_base"]["config"]["decoder_backward"], "host",
+        "{m:#}"
     );
 }

@@ -1,0 +1,11 @@
+#!/usr/bin/env bash
+# Session 31: the fresh scans' category-aware block, scans 15-29 x 2, shipped and v5.
+cd /work/exp/s30
+B=/work/bin/physnap-s27
+for w in shipped v5; do
+  case $w in shipped) W=/work/exp/s30/shipped_w;; v5) W=v5/weights;; esac
+  RAYON_NUM_THREADS=1 $B eval guided --weights $W --clouds /work/data/testset_s1_15_29 --max-clouds 15 --samples-per-cloud 2 \
+    --variants pc+pen+mob --category-aware yes --out s1b_g_${w}_yes > s1b_g_${w}_yes.log 2>&1 &
+done
+wait
+echo done > s1b_yes.done

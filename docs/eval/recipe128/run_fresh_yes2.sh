@@ -1,5 +1,10 @@
 #!/usr/bin/env bash
 # Session 31: the fresh scans' category-aware block, scans 15-29 x 2, shipped and v5.
+# /work/data/testset_s1_15_29 (eval guided has --max-clouds but no offset) was made with:
+#   mkdir -p /work/data/testset_s1_15_29 && python3 -c "import json,shutil
+#   d=json.load(open('/work/data/testset_s1/testset.json')); d['clouds']=d['clouds'][15:30]
+#   [shutil.copy('/work/data/testset_s1/'+c['cloud'],'/work/data/testset_s1_15_29/') for c in d['clouds']]
+#   json.dump(d,open('/work/data/testset_s1_15_29/testset.json','w'))"
 cd /work/exp/s30
 B=/work/bin/physnap-s27
 for w in shipped v5; do

@@ -25,7 +25,7 @@ import random
 import statistics
 import sys
 
-METRICS = ["e_pc", "d_pc", "e_pen", "e_mob", "o_mesh"]
+METRICS = ["e_pc", "d_pc", "e_pen", "e_mob", "o_mesh", "id_gt"]
 
 
 def load(paths, variant, aware):

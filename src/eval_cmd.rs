@@ -86,13 +86,14 @@ fn test_ids(data: &Path, n: usize, seed: u64) -> anyhow::Result<Vec<String>> {
 /// which the paper leaves open): the scanned object itself when `data` holds it, then other
 /// test-split objects of the cloud's category in a seeded order, `per_cloud` in all, each
 /// prepared for the instantiation distance. A cloud without a category gets only its own object.
+/// Also returns, per cloud, whether its first reference is the scanned object (for ID_gt).
 pub fn cloud_references(
     data: &Path,
     clouds: &[physnap::eval::guided::Cloud],
     per_cloud: usize,
     id: &IdOptions,
     seed: u64,
-) -> anyhow::Result<Vec<Vec<StateClouds>>> {
+) -> anyhow::Result<(Vec<Vec<StateClouds>>, Vec<bool>)> {
     let (index_path, index) = read_index(data)?;
     let objects = index["objects"]
         .as_array()
@@ -106,11 +107,16 @@ pub fn cloud_references(
     };
     let all: Vec<(String, Option<usize>, bool)> = objects.iter().map(entry).collect();
     let mut rng = Rng::new(seed);
-    clouds
+    let scanned: Vec<bool> = clouds
         .iter()
-        .map(|cloud| {
+        .map(|cloud| all.iter().any(|(id, _, _)| id == &cloud.id) && per_cloud > 0)
+        .collect();
+    let refs = clouds
+        .iter()
+        .zip(&scanned)
+        .map(|(cloud, &known)| {
             let mut ids: Vec<String> = Vec::new();
-            if all.iter().any(|(id, _, _)| id == &cloud.id) {
+            if known {
                 ids.push(cloud.id.clone());
             }
             if let Some(cat) = cloud.category {
@@ -133,7 +139,8 @@ pub fn cloud_references(
                 })
                 .collect()
         })
-        .collect()
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    Ok((refs, scanned))
 }
 
 /// A progress bar over `total` instantiation-distance pairs, ticked from `distance_matrix`'s

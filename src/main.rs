@@ -579,6 +579,10 @@ struct EvalGuidedArgs {
     /// Use at most this many clouds (0: all; paper: 30).
     #[arg(long, env = "PHYSNAP_MAX_CLOUDS", default_value_t = 0)]
     max_clouds: usize,
+    /// Skip the first N clouds (then take --max-clouds). The samples keep the seeds a run over
+    /// all the clouds gives them, so two slices make up one full run.
+    #[arg(long, env = "PHYSNAP_SKIP_CLOUDS", default_value_t = 0)]
+    skip_clouds: usize,
     /// Seed of the first sample.
     #[arg(long, env = "PHYSNAP_SEED", default_value_t = 0)]
     seed: u64,
@@ -592,7 +596,8 @@ struct EvalGuidedArgs {
     #[arg(long, env = "PHYSNAP_OUT")]
     out: PathBuf,
     /// Imported data set (`data import` output) holding the scanned objects and the test split:
-    /// enables the per-cloud MMD / 1-NNA columns. Without it they show "—".
+    /// enables the per-cloud MMD / 1-NNA columns and ID_gt (each sample's instantiation distance
+    /// to the object its scan came from). Without it they show "—".
     #[arg(long, env = "PHYSNAP_DATA")]
     data: Option<PathBuf>,
     /// Reference objects per cloud for MMD / 1-NNA: the scanned object, then test objects of its

@@ -669,7 +669,11 @@ fn write_ranking(
 }
 
 /// Clouds of `dir`: from testset.json when present (with categories), else every cloud file.
-fn read_clouds(dir: &Path, max: usize) -> anyhow::Result<Vec<physnap::eval::guided::Cloud>> {
+fn read_clouds(
+    dir: &Path,
+    skip: usize,
+    max: usize,
+) -> anyhow::Result<Vec<physnap::eval::guided::Cloud>> {
     let limits = Limits {
         min_points: 1,
         max_points: physnap::engine::guidance::MAX_POINTS,
@@ -701,6 +705,16 @@ fn read_clouds(dir: &Path, max: usize) -> anyhow::Result<Vec<physnap::eval::guid
                 .unwrap_or_default();
             entries.push((id, None, p));
         }
+    }
+    let available = entries.len();
+    if skip > 0 {
+        if skip >= available {
+            bail!(
+                "invalid --skip-clouds: {skip} (must be below the {available} clouds in {})",
+                dir.display()
+            );
+        }
+        entries.drain(..skip);
     }
     if max > 0 {
         entries.truncate(max);
@@ -744,7 +758,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
     }
     let device = physnap::model::cpu();
     let models = load_models(&a.weights, &device)?;
-    let clouds = read_clouds(&a.clouds, a.max_clouds)?;
+    let clouds = read_clouds(&a.clouds, a.skip_clouds, a.max_clouds)?;
     let meshing = MeshingOptions {
         resolution: a.resolution,
     };
@@ -753,6 +767,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
     let opts = TableOptions {
         samples_per_cloud: a.samples_per_cloud,
         seed: a.seed,
+        first_cloud: a.skip_clouds,
         category_aware: match a.category_aware.as_str() {
             "no" => vec![false],
             "yes" => vec![true],
@@ -776,6 +791,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         steps: a.sampling.steps,
         meshing,
         references: Vec::new(),
+        scanned: Vec::new(),
         id: IdOptions {
             states: a.id_states,
             points: a.id_points,
@@ -797,10 +813,11 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
                 "preparing up to {per_cloud} reference objects per cloud from {}…",
                 data.display()
             );
+            let (references, scanned) =
+                super::eval_cmd::cloud_references(data, &clouds, per_cloud, &opts.id, a.seed)?;
             TableOptions {
-                references: super::eval_cmd::cloud_references(
-                    data, &clouds, per_cloud, &opts.id, a.seed,
-                )?,
+                references,
+                scanned,
                 ..opts
             }
         }
@@ -859,27 +876,11 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         serde_json::json!({
             "cloud": s.cloud, "seed": s.seed, "seconds": s.seconds, "diverged": s.metrics.is_none(),
             "e_pc": m(0), "d_pc": m(1), "e_pen": m(2), "e_mob": m(3), "o_mesh": m(4),
+            "id_gt": s.id_gt.map(num),
         })
     };
-    let json = serde_json::json!({
-        "format": "physnap.guided_table/v1",
-        "clouds": clouds.iter().map(|c| c.id.clone()).collect::<Vec<_>>(),
-        "samples_per_cloud": a.samples_per_cloud,
-        "command": std::env::args().collect::<Vec<_>>().join(" "),
-        "seed": a.seed, "guidance_steps": a.sampling.guidance_steps, "tau": a.sampling.tau,
-        "guidance_max_step": opts.max_step, "guidance_refine_steps": opts.refine_steps,
-        "loss_scales": opts.loss_scales,
-        "sampler": a.sampling.sampler, "steps": a.sampling.steps, "eta": a.sampling.eta,
-        "category_guidance": a.sampling.category.category_guidance,
-        "category_guidance_below": a.sampling.category.category_guidance_below,
-        "retrieval": opts.retrieval.as_str(), "joint_motion": a.sampling.joint_motion,
-        "statistic": "E_* and D_pc: median over all samples; MMD and 1-NNA: per cloud (its samples vs its references), median over clouds",
-        "references": a.data.as_ref().map(|d| serde_json::json!({
-            "data": d.display().to_string(), "per_cloud": per_cloud,
-            "id_states": a.id_states, "id_points": a.id_points,
-        })),
-        "sweep": a.sweep,
-        "rows": rows.iter().map(|r| serde_json::json!({
+    let row_json = |r: &physnap::eval::guided::TableRow| {
+        let mut v = serde_json::json!({
             "category_aware": r.category_aware, "variant": r.variant,
             "guidance": r.guidance.map(|g| serde_json::json!({
                 "w_pc": g.w_pc, "w_pen": g.w_pen, "w_mob": g.w_mob, "n_g": g.steps, "tau": g.tau,
@@ -891,7 +892,31 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
             "mmd": num(r.mmd), "one_nna": num(r.one_nna),
             "samples": r.samples, "diverged": r.diverged, "seconds_per_sample": r.seconds_per_sample,
             "per_sample": r.per_sample.iter().map(sample_json).collect::<Vec<_>>(),
-        })).collect::<Vec<_>>(),
+        });
+        v["id_gt"] = num(r.id_gt);
+        v["id_gt_mean"] = num(r.id_gt_mean);
+        v
+    };
+    let json = serde_json::json!({
+        "format": "physnap.guided_table/v1",
+        "clouds": clouds.iter().map(|c| c.id.clone()).collect::<Vec<_>>(),
+        "samples_per_cloud": a.samples_per_cloud,
+        "skip_clouds": a.skip_clouds,
+        "command": std::env::args().collect::<Vec<_>>().join(" "),
+        "seed": a.seed, "guidance_steps": a.sampling.guidance_steps, "tau": a.sampling.tau,
+        "guidance_max_step": opts.max_step, "guidance_refine_steps": opts.refine_steps,
+        "loss_scales": opts.loss_scales,
+        "sampler": a.sampling.sampler, "steps": a.sampling.steps, "eta": a.sampling.eta,
+        "category_guidance": a.sampling.category.category_guidance,
+        "category_guidance_below": a.sampling.category.category_guidance_below,
+        "retrieval": opts.retrieval.as_str(), "joint_motion": a.sampling.joint_motion,
+        "statistic": "E_* and D_pc: median over all samples; MMD and 1-NNA: per cloud (its samples vs its references), median over clouds; ID_gt: each sample's instantiation distance to the scanned object, median and mean over samples",
+        "references": a.data.as_ref().map(|d| serde_json::json!({
+            "data": d.display().to_string(), "per_cloud": per_cloud,
+            "id_states": a.id_states, "id_points": a.id_points,
+        })),
+        "sweep": a.sweep,
+        "rows": rows.iter().map(row_json).collect::<Vec<_>>(),
     });
     std::fs::write(
         a.out.join(format!("{stem}.json")),

@@ -354,6 +354,14 @@ fn eval_guided_refuses_unknown_variants_and_empty_cloud_folders() {
         "{e}"
     );
     assert!(!dir.path().join("out/guided_table.md").exists());
+    // Skipping every cloud: the flag, the limit and the value.
+    let o = run(args(&["--skip-clouds", "1"]));
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(
+        e.contains("--skip-clouds") && e.contains("below the 1 clouds") && e.contains(": 1"),
+        "{e}"
+    );
     // A sweep picks its own rows; bad sweep values are named.
     let o = run(args(&["--sweep", "pen", "--variants", "pc"]));
     assert!(!o.status.success());

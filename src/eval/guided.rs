@@ -50,7 +50,7 @@ use crate::engine::guidance::grid::ints;
 use crate::engine::guidance::{SdfField, decode, mob, pen};
 use crate::eval::generative::{
     DistributionMetrics, IdOptions, MetricOrder, StateClouds, distance_matrix,
-    distribution_metrics, state_clouds,
+    distribution_metrics, instantiation_distance, state_clouds,
 };
 use crate::graph::project::{existing_slots, spanning_tree};
 use crate::graph::{EDGE_DIM, GraphTensor, K, NODE_DIM, NUM_EDGES, edge_ch, edge_index};
@@ -351,8 +351,12 @@ pub struct Cloud {
 pub struct TableOptions {
     /// Samples per cloud and variant (paper: 15).
     pub samples_per_cloud: usize,
-    /// Seed of sample k of cloud c: seed + c · samples_per_cloud + k (same across variants).
+    /// Seed of sample k of cloud c: seed + (first_cloud + c) · samples_per_cloud + k (same
+    /// across variants).
     pub seed: u64,
+    /// Index of the first cloud in the whole test set, when the run covers a slice of it
+    /// (`eval guided --skip-clouds`): the slice's samples get the seeds a full run gives them.
+    pub first_cloud: usize,
     /// Category-aware blocks to run (false: unconditional model input; true: the cloud's category).
     pub category_aware: Vec<bool>,
     /// Names of the [`VARIANTS`] to run, in the table's order (empty: all five).
@@ -379,6 +383,10 @@ pub struct TableOptions {
     /// prepared for the instantiation distance with [`Self::id`]. Empty (or shorter than the
     /// clouds): no generative metrics for those clouds.
     pub references: Vec<Vec<StateClouds>>,
+    /// Per cloud, whether `references[c][0]` is the scanned object itself. For those clouds each
+    /// sample's instantiation distance to it (ID_gt, the completion's distance to the object
+    /// the scan came from, unobserved side included) is recorded.
+    pub scanned: Vec<bool>,
     /// States and points of the instantiation distance.
     pub id: IdOptions,
     /// Which part shapes are replaced by their nearest codebook code (needs a codebook).
@@ -427,6 +435,11 @@ pub struct TableRow {
     pub mmd: f64,
     /// Median over clouds of the per-cloud 1-NNA (NaN without references).
     pub one_nna: f64,
+    /// Median over samples of ID_gt, the instantiation distance to the scanned object (NaN
+    /// when no cloud's object is known).
+    pub id_gt: f64,
+    /// Mean ID_gt.
+    pub id_gt_mean: f64,
     /// Samples that finished.
     pub samples: usize,
     /// Samples that diverged (reported, excluded from the medians).
@@ -446,6 +459,9 @@ pub struct SampleRecord {
     pub seed: u64,
     /// (E_pc, D_pc, E_pen, E_mob, O_mesh); None when the sample diverged.
     pub metrics: Option<[f64; 5]>,
+    /// Instantiation distance to the scanned object; None when it is not known (no `--data`,
+    /// the object is not in it) or the sample diverged or has no surface.
+    pub id_gt: Option<f64>,
     /// Wall time of this sample (s), sampling + meshing + metrics.
     pub seconds: f64,
 }
@@ -727,6 +743,7 @@ pub fn run_rows(
             let started = std::time::Instant::now();
             let mut values: [Vec<f64>; 5] = Default::default();
             let mut per_cloud: [Vec<f64>; 2] = Default::default();
+            let mut id_gt = Vec::new();
             let mut diverged = 0;
             let mut per_sample = Vec::new();
             for (c, cloud) in clouds.iter().enumerate() {
@@ -745,7 +762,7 @@ pub fn run_rows(
                 for k in 0..opts.samples_per_cloud {
                     let seed = opts
                         .seed
-                        .wrapping_add((c * opts.samples_per_cloud + k) as u64);
+                        .wrapping_add(((opts.first_cloud + c) * opts.samples_per_cloud + k) as u64);
                     let sample_started = std::time::Instant::now();
                     let category = if aware { cloud.category } else { None };
                     let req = GenerateRequest {
@@ -790,19 +807,29 @@ pub fn run_rows(
                             for (slot, v) in values.iter_mut().zip(all) {
                                 slot.push(v);
                             }
+                            // A sample without any mesh triangles has no surface to compare;
+                            // it stays out of the generative metrics and ID_gt (it still
+                            // counts above).
+                            let sc = if refs.is_empty() {
+                                None
+                            } else {
+                                state_clouds(&g.object, &g.meshes, &opts.id, g.seed).ok()
+                            };
+                            let gt = match (&sc, opts.scanned.get(c)) {
+                                (Some(sc), Some(true)) => {
+                                    Some(instantiation_distance(sc, &refs[0]))
+                                }
+                                _ => None,
+                            };
+                            id_gt.extend(gt);
                             per_sample.push(SampleRecord {
                                 cloud: cloud.id.clone(),
                                 seed,
                                 metrics: Some(all),
+                                id_gt: gt,
                                 seconds: sample_started.elapsed().as_secs_f64(),
                             });
-                            // A sample without any mesh triangles has no surface to compare;
-                            // it stays out of the generative metrics (it still counts above).
-                            if !refs.is_empty()
-                                && let Ok(sc) = state_clouds(&g.object, &g.meshes, &opts.id, g.seed)
-                            {
-                                generated.push(sc);
-                            }
+                            generated.extend(sc);
                         }
                         Err(EngineError::Diverged { .. }) => {
                             diverged += 1;
@@ -810,6 +837,7 @@ pub fn run_rows(
                                 cloud: cloud.id.clone(),
                                 seed,
                                 metrics: None,
+                                id_gt: None,
                                 seconds: sample_started.elapsed().as_secs_f64(),
                             });
                         }
@@ -840,6 +868,8 @@ pub fn run_rows(
                 o_mesh_share: positive_share(&values[4]),
                 mmd: median(&per_cloud[0]),
                 one_nna: median(&per_cloud[1]),
+                id_gt: median(&id_gt),
+                id_gt_mean: mean(&id_gt),
                 samples: n,
                 diverged,
                 seconds_per_sample: started.elapsed().as_secs_f64() / (n + diverged).max(1) as f64,
@@ -894,14 +924,15 @@ pub fn positive_share(values: &[f64]) -> f64 {
 
 /// The table as Markdown in the paper's layout ("—" where a metric could not be computed),
 /// followed by physnap's extra columns: means of E_pen / E_mob / O_mesh and the share of
-/// samples in which they are non-zero.
+/// samples in which they are non-zero, then the median and mean ID_gt (the completion's
+/// instantiation distance to the scanned object).
 pub fn table_markdown(rows: &[TableRow]) -> String {
     let mut s = String::from(
-        "| category | variant | E_pc | D_pc | E_pen | E_mob | MMD | 1-NNA | samples | diverged | s/sample | E_pen mean | E_mob mean | E_pen > 0 | E_mob > 0 | O_mesh mean | O_mesh > 0 |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| category | variant | E_pc | D_pc | E_pen | E_mob | MMD | 1-NNA | samples | diverged | s/sample | E_pen mean | E_mob mean | E_pen > 0 | E_mob > 0 | O_mesh mean | O_mesh > 0 | ID_gt | ID_gt mean |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         s.push_str(&format!(
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {} | {} | {} | {} | {} | {} |\n",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
             if r.category_aware { "yes" } else { "no" },
             r.variant,
             cell(r.e_pc),
@@ -919,6 +950,8 @@ pub fn table_markdown(rows: &[TableRow]) -> String {
             percent(r.mob_share),
             cell(r.o_mesh_mean),
             percent(r.o_mesh_share),
+            cell(r.id_gt),
+            cell(r.id_gt_mean),
         ));
     }
     s
@@ -1119,6 +1152,7 @@ mod tests {
         let opts = TableOptions {
             samples_per_cloud: 1,
             seed: 0,
+            first_cloud: 0,
             category_aware: vec![false, true],
             variants: Vec::new(),
             guided_steps: 1000,
@@ -1130,6 +1164,7 @@ mod tests {
             steps: 4,
             meshing: MeshingOptions { resolution: 8 },
             references: Vec::new(),
+            scanned: Vec::new(),
             id: IdOptions::default(),
             retrieval: Retrieval::Off,
             category_guidance: 0.0,
@@ -1180,8 +1215,75 @@ mod tests {
         let md = table_markdown(&rows);
         assert_eq!(md.lines().count(), 12);
         assert!(md.contains("| yes | pc+pen+mob |"), "{md}");
-        assert!(md.lines().all(|l| l.matches('|').count() == 18), "{md}");
-        assert!(md.contains("| O_mesh mean | O_mesh > 0 |"), "{md}");
+        assert!(md.lines().all(|l| l.matches('|').count() == 20), "{md}");
+        assert!(
+            md.contains("| O_mesh mean | O_mesh > 0 | ID_gt | ID_gt mean |"),
+            "{md}"
+        );
+        // Without the scanned object there is no ID_gt.
+        assert!(rows.iter().all(|r| r.id_gt.is_nan()), "{rows:?}");
+        assert!(
+            rows.iter()
+                .flat_map(|r| &r.per_sample)
+                .all(|s| s.id_gt.is_none())
+        );
+
+        // With the scanned object as the cloud's first reference, every sample with a surface
+        // records its instantiation distance to it, and the row reports their median and mean.
+        // A slice of the test set (first_cloud) keeps the seeds a full run gives its clouds.
+        let id = IdOptions {
+            states: 2,
+            points: 64,
+        };
+        let cab = crate::fixtures::cabinet();
+        let cab_meshes =
+            crate::mesh::mesh_parts(&cab, None, &MeshingOptions { resolution: 16 }).unwrap();
+        let gt = state_clouds(&cab, &cab_meshes, &id, 7).unwrap();
+        let with_gt = TableOptions {
+            category_aware: vec![false],
+            variants: vec!["uncond".into()],
+            samples_per_cloud: 2,
+            first_cloud: 3,
+            references: vec![vec![gt.clone(), gt]],
+            scanned: vec![true],
+            id,
+            ..opts.clone()
+        };
+        let rows = guided_table(
+            &denoiser,
+            &decoder,
+            None,
+            &FeatureScales::default(),
+            &Schedule::default(),
+            &clouds,
+            &with_gt,
+            &mut |_, _| {},
+        )
+        .unwrap();
+        let seeds: Vec<u64> = rows[0].per_sample.iter().map(|s| s.seed).collect();
+        assert_eq!(seeds, [6, 7], "cloud 3 of a full run, 2 samples per cloud");
+        let ids: Vec<f64> = rows[0].per_sample.iter().filter_map(|s| s.id_gt).collect();
+        assert!(!ids.is_empty(), "{rows:?}");
+        assert!(ids.iter().all(|d| d.is_finite() && *d > 0.0), "{ids:?}");
+        assert_eq!(rows[0].id_gt, median(&ids));
+        assert_eq!(rows[0].id_gt_mean, mean(&ids));
+        // The same references, not marked as the scanned object: no ID_gt.
+        let rows = guided_table(
+            &denoiser,
+            &decoder,
+            None,
+            &FeatureScales::default(),
+            &Schedule::default(),
+            &clouds,
+            &TableOptions {
+                scanned: vec![false],
+                ..with_gt
+            },
+            &mut |_, _| {},
+        )
+        .unwrap();
+        assert!(rows[0].per_sample.iter().all(|s| s.id_gt.is_none()));
+        assert!(rows[0].id_gt.is_nan());
         // A cloud without a category: the category-aware block is left out.
         let anon = vec![Cloud {
             category: None,

@@ -1144,6 +1144,18 @@ mod tests {
             &dev,
         );
         let decoder = LatentSdfDecoder::new(&shape);
+        let table = |clouds: &[Cloud], opts: &TableOptions| {
+            guided_table(
+                &denoiser,
+                &decoder,
+                None,
+                &FeatureScales::default(),
+                &Schedule::default(),
+                clouds,
+                opts,
+                &mut |_, _| {},
+            )
+        };
         let clouds = vec![Cloud {
             id: "c0".into(),
             category: Some(1),
@@ -1249,17 +1261,7 @@ mod tests {
             id,
             ..opts.clone()
         };
-        let rows = guided_table(
-            &denoiser,
-            &decoder,
-            None,
-            &FeatureScales::default(),
-            &Schedule::default(),
-            &clouds,
-            &with_gt,
-            &mut |_, _| {},
-        )
-        .unwrap();
+        let rows = table(&clouds, &with_gt).unwrap();
         let seeds: Vec<u64> = rows[0].per_sample.iter().map(|s| s.seed).collect();
         assert_eq!(seeds, [6, 7], "cloud 3 of a full run, 2 samples per cloud");
         let ids: Vec<f64> = rows[0].per_sample.iter().filter_map(|s| s.id_gt).collect();
@@ -1268,18 +1270,12 @@ mod tests {
         assert_eq!(rows[0].id_gt, median(&ids));
         assert_eq!(rows[0].id_gt_mean, mean(&ids));
         // The same references, not marked as the scanned object: no ID_gt.
-        let rows = guided_table(
-            &denoiser,
-            &decoder,
-            None,
-            &FeatureScales::default(),
-            &Schedule::default(),
+        let rows = table(
             &clouds,
             &TableOptions {
                 scanned: vec![false],
                 ..with_gt
             },
-            &mut |_, _| {},
         )
         .unwrap();
         assert!(rows[0].per_sample.iter().all(|s| s.id_gt.is_none()));
@@ -1289,51 +1285,33 @@ mod tests {
             category: None,
             ..clouds[0].clone()
         }];
-        let rows = guided_table(
-            &denoiser,
-            &decoder,
-            None,
-            &FeatureScales::default(),
-            &Schedule::default(),
+        let rows = table(
             &anon,
             &TableOptions {
                 category_aware: vec![true],
                 ..opts.clone()
             },
-            &mut |_, _| {},
         )
         .unwrap();
         assert!(rows.is_empty());
         // A subset of the variants, in the table's order; an unknown name is refused.
-        let rows = guided_table(
-            &denoiser,
-            &decoder,
-            None,
-            &FeatureScales::default(),
-            &Schedule::default(),
+        let rows = table(
             &clouds,
             &TableOptions {
                 category_aware: vec![false],
                 variants: vec!["uncond".into(), "pc".into()],
                 ..opts.clone()
             },
-            &mut |_, _| {},
         )
         .unwrap();
         let names: Vec<&str> = rows.iter().map(|r| r.variant.as_str()).collect();
         assert_eq!(names, ["pc", "uncond"]);
-        let err = guided_table(
-            &denoiser,
-            &decoder,
-            None,
-            &FeatureScales::default(),
-            &Schedule::default(),
+        let err = table(
             &clouds,
             &TableOptions {
                 variants: vec!["pc+penn".into()],
                 ..opts.clone()
             },
-            &mut |_, _| {},
         )
         .unwrap_err()
         .to_string();

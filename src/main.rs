@@ -580,7 +580,8 @@ struct EvalGuidedArgs {
     #[arg(long, env = "PHYSNAP_MAX_CLOUDS", default_value_t = 0)]
     max_clouds: usize,
     /// Skip the first N clouds (then take --max-clouds). The samples keep the seeds a run over
-    /// all the clouds gives them, so two slices make up one full run.
+    /// all the clouds gives them, so two slices make up one full run's samples (the per-cloud
+    /// MMD / 1-NNA references after the scanned object are drawn anew and can differ).
     #[arg(long, env = "PHYSNAP_SKIP_CLOUDS", default_value_t = 0)]
     skip_clouds: usize,
     /// Seed of the first sample.

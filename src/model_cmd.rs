@@ -893,6 +893,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
             "samples": r.samples, "diverged": r.diverged, "seconds_per_sample": r.seconds_per_sample,
             "per_sample": r.per_sample.iter().map(sample_json).collect::<Vec<_>>(),
         });
+        // Set apart: two more keys inside the json! above exceed the macro's recursion limit.
         v["id_gt"] = num(r.id_gt);
         v["id_gt_mean"] = num(r.id_gt_mean);
         v

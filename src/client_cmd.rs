@@ -89,8 +89,8 @@ pub struct SubmitArgs {
     /// category's codes).
     #[arg(long, env = "PHYSNAP_RETRIEVAL", value_parser = ["auto", "off", "empty", "all", "category"])]
     retrieval: Option<String>,
-    /// Classifier-free category guidance w in [0, 20] with --category (server default 2;
-    /// 0: plain conditioning).
+    /// Classifier-free category guidance w in [0, 20] with --category (server default: 0 for a
+    /// scan-guided job, 2 without loss guidance; 0: plain conditioning).
     #[arg(long, env = "PHYSNAP_CATEGORY_GUIDANCE")]
     category_guidance: Option<f64>,
     /// Apply the category guidance only in steps with diffusion time t below this, 1-1000

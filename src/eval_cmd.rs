@@ -257,6 +257,7 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
     let conditional = a.per_category > 0 && models.manifest.denoiser.config.categories > 0;
     // The conditioned samples here are never loss-guided.
     let guidance_below = a.category.below(false);
+    let guidance_weight = a.category.weight(false);
     // Category accuracy searches its own reference set: the whole test split by default.
     let same_refs = conditional && a.category_refs == a.refs;
     let cat_refs = if !conditional {
@@ -327,7 +328,7 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
                 seed,
                 samples: a.per_category,
                 category: Some(idx),
-                category_guidance: a.category.category_guidance,
+                category_guidance: guidance_weight,
                 category_guidance_below: Some(guidance_below),
                 ..base.clone()
             };
@@ -499,7 +500,7 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
             "  valid conditioned samples: {}/{} (category guidance w = {} at t < {})",
             cond_valid.len(),
             cond.len(),
-            a.category.category_guidance,
+            guidance_weight,
             guidance_below
         );
         for e in &per_cat {
@@ -540,7 +541,7 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
         "sampler": a.sampler,
         "steps": steps_run,
         "eta": a.eta,
-        "category_guidance": a.category.category_guidance,
+        "category_guidance": guidance_weight,
         "category_guidance_below": guidance_below,
         "unconditional": {
             "retrieved_samples": retrieved_samples,

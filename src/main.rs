@@ -504,8 +504,10 @@ struct GenerateArgs {
 struct CategoryGuidanceArgs {
     /// Classifier-free category guidance w for category-conditioned samples:
     /// ε̂ = ε̂(c) + w·(ε̂(c) − ε̂(∅)) (0: plain conditioning; > 0 doubles the denoiser's work).
-    #[arg(long, env = "PHYSNAP_CATEGORY_GUIDANCE", default_value_t = physnap::engine::sample::DEFAULT_CATEGORY_GUIDANCE)]
-    category_guidance: f64,
+    /// Default: 2 without loss guidance, 0 when a scan guides the sample (w = 2 completed scans
+    /// worse).
+    #[arg(long, env = "PHYSNAP_CATEGORY_GUIDANCE")]
+    category_guidance: Option<f64>,
     /// Apply the category guidance only in steps with diffusion time t below this, 1-1000;
     /// above it the plain conditional prediction is used (one forward). Default: 500 without
     /// loss guidance, 1000 (every step) when a scan guides the sample.
@@ -514,6 +516,11 @@ struct CategoryGuidanceArgs {
 }
 
 impl CategoryGuidanceArgs {
+    /// `--category-guidance`, or its default for a sample with or without loss guidance.
+    fn weight(&self, loss_guided: bool) -> f64 {
+        physnap::engine::sample::category_guidance(self.category_guidance, loss_guided)
+    }
+
     /// `--category-guidance-below`, or its default for a sample with or without loss guidance.
     fn below(&self, loss_guided: bool) -> usize {
         physnap::engine::sample::category_guidance_below(self.category_guidance_below, loss_guided)

@@ -434,6 +434,7 @@ pub fn generate(a: GenerateArgs) -> anyhow::Result<()> {
         bail!("invalid --samples: 0 (must be at least 1)");
     }
     let guidance = guidance_options(&a)?;
+    let loss_guided = guidance.as_ref().is_some_and(|g| g.is_active());
     let sampler = sampler(&a.sampling.sampler, a.sampling.eta);
     let req = GenerateRequest {
         seed: a.seed,
@@ -447,12 +448,8 @@ pub fn generate(a: GenerateArgs) -> anyhow::Result<()> {
         sampler,
         steps: a.sampling.steps,
         retrieval: retrieval_mode(&a.sampling.retrieval, &models)?,
-        category_guidance: a.sampling.category.category_guidance,
-        category_guidance_below: Some(
-            a.sampling
-                .category
-                .below(guidance.as_ref().is_some_and(|g| g.is_active())),
-        ),
+        category_guidance: a.sampling.category.weight(loss_guided),
+        category_guidance_below: Some(a.sampling.category.below(loss_guided)),
         joint_motion: joint_motion(&a.sampling.joint_motion)?,
         ..Default::default()
     };
@@ -896,6 +893,8 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         // Set apart: two more keys inside the json! above exceed the macro's recursion limit.
         v["id_gt"] = num(r.id_gt);
         v["id_gt_mean"] = num(r.id_gt_mean);
+        v["category_guidance"] = r.category_guidance.map(|(w, _)| w).into();
+        v["category_guidance_below"] = r.category_guidance.map(|(_, b)| b).into();
         v
     };
     let json = serde_json::json!({
@@ -908,6 +907,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         "guidance_max_step": opts.max_step, "guidance_refine_steps": opts.refine_steps,
         "loss_scales": opts.loss_scales,
         "sampler": a.sampling.sampler, "steps": a.sampling.steps, "eta": a.sampling.eta,
+        // The flags as given (null: each row's default, recorded in the row).
         "category_guidance": a.sampling.category.category_guidance,
         "category_guidance_below": a.sampling.category.category_guidance_below,
         "retrieval": opts.retrieval.as_str(), "joint_motion": a.sampling.joint_motion,

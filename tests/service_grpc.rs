@@ -333,7 +333,9 @@ async fn cli_submit_watch_downloads_verified_artifacts() {
     let job = s.svc.get("local", &id).await.unwrap();
     assert_eq!(job.state, "SUCCEEDED");
     assert_eq!(job.request.category.as_deref(), Some("Door"));
-    // A scan-guided job is category-guided in every step unless asked otherwise.
+    // A scan-guided job with a category runs without category guidance by default (w = 2
+    // completed scans worse), in every step when a weight is asked for.
+    assert_eq!(job.request.category_guidance, 0.0);
     assert_eq!(job.request.category_guidance_below, 1000);
     for a in &job.artifacts {
         let bytes = std::fs::read(out.join(&a.name)).unwrap();

@@ -54,9 +54,28 @@ pub const DIVERGENCE_LIMIT: f32 = 1e4;
 /// apart from the diffusion noise.
 const MOB_STREAM: u64 = 0x4755_4944_414e_4345;
 
-/// The category guidance weight the CLI and the service use by default (see EVALUATION.md,
-/// "Category guidance").
-pub const DEFAULT_CATEGORY_GUIDANCE: f64 = 2.0;
+/// The category guidance weight the CLI and the service use by default for plain sampling
+/// (see EVALUATION.md, "Category guidance").
+pub const UNGUIDED_CATEGORY_GUIDANCE: f64 = 2.0;
+
+/// The category guidance weight by default when loss guidance pulls the sample to a scan: none.
+/// There w = 2 put completions 1.6× further from the scanned object (ID_gt) than w = 0, on the
+/// fresh and on the test scans, and D_pc and part overlap were no better (EVALUATION.md, "Scan
+/// completion measured against the scanned object"). The category still conditions the
+/// denoiser.
+pub const LOSS_GUIDED_CATEGORY_GUIDANCE: f64 = 0.0;
+
+/// The [`SampleRequest::category_guidance`] the CLI, the evaluations and the service run: the
+/// requested weight, else [`UNGUIDED_CATEGORY_GUIDANCE`] for plain sampling and
+/// [`LOSS_GUIDED_CATEGORY_GUIDANCE`] when loss guidance pulls the sample to a scan. Not
+/// range-checked here: [`sample_guided`] and the service validate it.
+pub fn category_guidance(requested: Option<f64>, loss_guided: bool) -> f64 {
+    requested.unwrap_or(if loss_guided {
+        LOSS_GUIDED_CATEGORY_GUIDANCE
+    } else {
+        UNGUIDED_CATEGORY_GUIDANCE
+    })
+}
 
 /// Without loss guidance, category guidance is applied by default only in the steps with
 /// diffusion time t below this ([`SampleRequest::category_guidance_below`]): above it the

@@ -36,7 +36,7 @@ use burn::tensor::{Tensor, TensorData};
 use crate::engine::EngineError;
 use crate::engine::generate::{GenerateRequest, JointMotion, PartShapes, Retrieval, generate_with};
 use crate::engine::guidance::{GuidanceOptions, Terms};
-use crate::engine::sample::{Sampler, category_guidance_below};
+use crate::engine::sample::{Sampler, category_guidance, category_guidance_below};
 use crate::engine::schedule::Schedule;
 use crate::graph::FeatureScales;
 use crate::mesh::MeshingOptions;
@@ -391,8 +391,9 @@ pub struct TableOptions {
     pub id: IdOptions,
     /// Which part shapes are replaced by their nearest codebook code (needs a codebook).
     pub retrieval: Retrieval,
-    /// Classifier-free category guidance of the category-aware rows.
-    pub category_guidance: f64,
+    /// Classifier-free category guidance of the category-aware rows; None: each row's default
+    /// ([`category_guidance`] of whether the row is guided).
+    pub category_guidance: Option<f64>,
     /// Steps where it applies, see [`GenerateRequest::category_guidance_below`]; None: each
     /// row's default ([`category_guidance_below`] of whether the row is guided).
     pub category_guidance_below: Option<usize>,
@@ -409,6 +410,9 @@ pub struct TableRow {
     pub variant: String,
     /// The guidance this row ran (None: unguided).
     pub guidance: Option<GuidanceSetting>,
+    /// The category guidance weight and its time limit this row ran, resolved from
+    /// [`TableOptions`] (None: a category-unaware row).
+    pub category_guidance: Option<(f64, usize)>,
     /// Median E_pc.
     pub e_pc: f64,
     /// Median D_pc.
@@ -739,6 +743,11 @@ pub fn run_rows(
     let mut rows = Vec::new();
     for spec in specs {
         let aware = spec.category_aware;
+        let loss_guided = spec
+            .guidance
+            .is_some_and(|g| g.w_pc > 0.0 || g.w_pen > 0.0 || g.w_mob > 0.0);
+        let category_weight = category_guidance(opts.category_guidance, loss_guided);
+        let category_below = category_guidance_below(opts.category_guidance_below, loss_guided);
         {
             let started = std::time::Instant::now();
             let mut values: [Vec<f64>; 5] = Default::default();
@@ -777,11 +786,8 @@ pub fn run_rows(
                             Some(_) => opts.retrieval,
                             None => opts.retrieval.without_category(),
                         },
-                        category_guidance: opts.category_guidance,
-                        category_guidance_below: Some(category_guidance_below(
-                            opts.category_guidance_below,
-                            guidance.as_ref().is_some_and(|g| g.is_active()),
-                        )),
+                        category_guidance: category_weight,
+                        category_guidance_below: Some(category_below),
                         joint_motion: opts.joint_motion,
                         ..Default::default()
                     };
@@ -856,6 +862,7 @@ pub fn run_rows(
                 category_aware: aware,
                 variant: spec.label.clone(),
                 guidance: spec.guidance,
+                category_guidance: aware.then_some((category_weight, category_below)),
                 e_pc: median(&values[0]),
                 d_pc: median(&values[1]),
                 e_pen: median(&values[2]),
@@ -1179,7 +1186,7 @@ mod tests {
             scanned: Vec::new(),
             id: IdOptions::default(),
             retrieval: Retrieval::Off,
-            category_guidance: 0.0,
+            category_guidance: None,
             category_guidance_below: None,
             joint_motion: JointMotion::Screw,
         };
@@ -1208,6 +1215,16 @@ mod tests {
             .flat_map(|&a| names.iter().map(move |&n| (a, n)))
             .collect();
         assert_eq!(labels, want);
+        // Unset, the category guidance is each row's default: none under loss guidance, w = 2
+        // below t = 500 for the unguided row; category-unaware rows have none to run.
+        for r in &rows {
+            let want = match (r.category_aware, r.guidance.is_some()) {
+                (false, _) => None,
+                (true, true) => Some((0.0, 1000)),
+                (true, false) => Some((2.0, 500)),
+            };
+            assert_eq!(r.category_guidance, want, "{}", r.variant);
+        }
         assert!(rows.iter().all(|r| r.samples + r.diverged == 1));
         // Every sample is on record with its cloud and seed, diverged ones without metrics.
         for r in &rows {

@@ -100,7 +100,9 @@ pub struct JobRequest {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub retrieval: Option<String>,
     /// Classifier-free category guidance w in [0, 20] (jobs with a category only):
-    /// ε̂ = ε̂(c) + w·(ε̂(c) − ε̂(∅)). Default 2 with a category; 0 = plain conditioning.
+    /// ε̂ = ε̂(c) + w·(ε̂(c) − ε̂(∅)); 0 = plain conditioning. Default 0 for a scan-guided job
+    /// (w = 2 completed scans further from the scanned object), 2 without loss guidance (all
+    /// weights 0).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub category_guidance: Option<f64>,
     /// Apply the category guidance only in reverse steps with diffusion time t below this,

@@ -15,7 +15,7 @@ use crate::engine::guidance::{
 };
 use crate::engine::sample::Sampler;
 use crate::engine::sample::{
-    DEFAULT_CATEGORY_GUIDANCE, DEFAULT_STEPS, MAX_CATEGORY_GUIDANCE, category_guidance_below,
+    DEFAULT_STEPS, MAX_CATEGORY_GUIDANCE, category_guidance, category_guidance_below,
 };
 use crate::engine::schedule::{NUM_STEPS, timesteps};
 use crate::pointcloud::{Format, Limits as CloudLimits, PointCloud, PointCloudError};
@@ -581,7 +581,8 @@ pub fn validate(
             ));
         }
     };
-    // Classifier-free category guidance: the default with a category, 0 without one.
+    // Classifier-free category guidance: with a category, the default for a scan-guided or a
+    // plain job (0 and 2); 0 without one.
     let category_guidance = match (input.category_guidance, &category) {
         (Some(w), _) if !(w.is_finite() && (0.0..=MAX_CATEGORY_GUIDANCE).contains(&w)) => {
             return Err(violation(
@@ -598,8 +599,7 @@ pub fn validate(
             ));
         }
         (_, None) => 0.0,
-        (Some(w), Some(_)) => w,
-        (None, Some(_)) => DEFAULT_CATEGORY_GUIDANCE,
+        (requested, Some(_)) => category_guidance(requested, loss_guided(w_pc, w_pen, w_mob)),
     };
     let category_guidance_below = category_guidance_below(
         input.category_guidance_below.map(|b| b as usize),
@@ -658,22 +658,32 @@ mod tests {
 
     #[test]
     fn category_guidance_defaults_with_a_category_and_is_zero_without() {
-        let run = |cat: Option<&str>, w: Option<f64>| {
+        // `w_pc` 0 (with the other weights 0) makes the job plain sampling; None keeps the
+        // default loss weights, a scan-guided job.
+        let run = |cat: Option<&str>, w: Option<f64>, w_pc: Option<f64>| {
             let input = JobInput {
                 points: Some(cloud(16)),
                 category: cat.map(str::to_string),
                 category_guidance: w,
+                w_pc,
+                w_pen: w_pc,
+                w_mob: w_pc,
                 ..Default::default()
             };
             validate(&input, &caps(), &Limits::default(), 1)
                 .unwrap()
                 .category_guidance
         };
-        assert_eq!(run(None, None), 0.0);
-        assert_eq!(run(None, Some(0.0)), 0.0);
-        assert_eq!(run(Some("Door"), None), DEFAULT_CATEGORY_GUIDANCE);
-        assert_eq!(run(Some("Door"), Some(0.0)), 0.0);
-        assert_eq!(run(Some("Door"), Some(4.5)), 4.5);
+        for w_pc in [None, Some(0.0)] {
+            assert_eq!(run(None, None, w_pc), 0.0);
+            assert_eq!(run(None, Some(0.0), w_pc), 0.0);
+            assert_eq!(run(Some("Door"), Some(0.0), w_pc), 0.0);
+            assert_eq!(run(Some("Door"), Some(4.5), w_pc), 4.5);
+        }
+        // By default a scan-guided job is not category-guided (it completed scans worse,
+        // EVALUATION.md); plain sampling is, at w = 2.
+        assert_eq!(run(Some("Door"), None, None), 0.0);
+        assert_eq!(run(Some("Door"), None, Some(0.0)), 2.0);
         // A scan-guided job is category-guided in every step by default, plain sampling only
         // below t = 500; either can be asked for.
         let below = |b: Option<u32>, w_pc: f64| {

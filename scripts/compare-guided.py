@@ -16,7 +16,7 @@ Only the standard library; reads `rows[*].per_sample` (physnap.guided_table/v1).
 
 Usage:
   scripts/compare-guided.py --a default1.json default2.json --b ddpm1.json ddpm2.json \
-      --variant pc+pen+mob --aware no [--label-a default --label-b "DDPM 1000"]
+      --variant pc+pen+mob --aware no [--label-a default --label-b "DDPM 1000"] [--common]
 """
 
 import argparse
@@ -82,10 +82,22 @@ def main():
     ap.add_argument("--label-a", default="A")
     ap.add_argument("--label-b", default="B")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--common",
+        action="store_true",
+        help="keep only the (cloud, seed) pairs both sides ran (e.g. a slice against a full run)",
+    )
     args = ap.parse_args()
     aware = args.aware == "yes"
     a, da = load(args.a, args.variant, aware)
     b, db = load(args.b, args.variant, aware)
+    if args.common:
+        ka = {(s["cloud"], s["seed"]) for s in a}
+        kb = {(s["cloud"], s["seed"]) for s in b}
+        a = [s for s in a if (s["cloud"], s["seed"]) in kb]
+        b = [s for s in b if (s["cloud"], s["seed"]) in ka]
+        if not a:
+            sys.exit("--common: the two sides share no (cloud, seed) pair")
     rng = random.Random(args.seed)
     print(
         f"{args.variant}, category-aware {args.aware}: "

@@ -21,4 +21,8 @@ RAYON_NUM_THREADS=2 $B train diffusion --data $T --shape p12k --out v5/weights -
   --noise-levels 4 --lr 5e-4 --checkpoint-every 500 --category-layers --steps 7000 --lr-decay-start 2000 \
   --lr-final-factor 0.1 --ema-decay 0.999 --resume > v5_stage2.log 2>&1
 wait
-# Then install the cycled decoder (train install-shape) and check: run_v5r_finish.sh.
+# Then, in session 33, the cycled decoder into a copy of the weights and the shape check:
+cp -r v5/weights v5r
+$B train install-shape --shape p12k_cycle1 --weights v5r > v5r_install.log 2>&1 || exit 1
+RAYON_NUM_THREADS=2 $B eval shape --weights v5r --data $T --parts 64 --write-manifest > v5r_shape.log 2>&1
+# The guided and generative checks: run_v5r_finish.sh.

@@ -35,7 +35,7 @@ use burn::tensor::{Tensor, TensorData};
 
 use crate::engine::EngineError;
 use crate::engine::generate::{GenerateRequest, JointMotion, PartShapes, Retrieval, generate_with};
-use crate::engine::guidance::{GuidanceOptions, Terms};
+use crate::engine::guidance::{GuidanceOptions, Terms, weights_active};
 use crate::engine::sample::{Sampler, category_guidance, category_guidance_below};
 use crate::engine::schedule::Schedule;
 use crate::graph::FeatureScales;
@@ -745,7 +745,7 @@ pub fn run_rows(
         let aware = spec.category_aware;
         let loss_guided = spec
             .guidance
-            .is_some_and(|g| g.w_pc > 0.0 || g.w_pen > 0.0 || g.w_mob > 0.0);
+            .is_some_and(|g| weights_active(g.w_pc, g.w_pen, g.w_mob));
         let category_weight = category_guidance(opts.category_guidance, loss_guided);
         let category_below = category_guidance_below(opts.category_guidance_below, loss_guided);
         {

@@ -11,7 +11,7 @@ use crate::data::categories::category_index;
 use crate::engine::generate::{JointMotion, Retrieval};
 use crate::engine::guidance::{
     DEFAULT_GUIDED_STEPS, DEFAULT_MAX_STEP, DEFAULT_REFINE_STEPS, DEFAULT_TAU, GuidanceOptions,
-    MAX_REFINE_STEPS,
+    MAX_REFINE_STEPS, weights_active,
 };
 use crate::engine::sample::Sampler;
 use crate::engine::sample::{
@@ -193,18 +193,13 @@ pub struct JobSpec {
     pub joint_motion: String,
 }
 
-/// Whether loss weights guide the sample (some weight > 0); false = plain NAP sampling.
-fn loss_guided(w_pc: f64, w_pen: f64, w_mob: f64) -> bool {
-    w_pc > 0.0 || w_pen > 0.0 || w_mob > 0.0
-}
-
 /// Largest τ accepted (the engine's limit).
 pub const MAX_TAU: f64 = 1e9;
 
 impl JobSpec {
     /// Whether any guidance weight is positive (otherwise the job samples unguided).
     pub fn guided(&self) -> bool {
-        loss_guided(self.w_pc, self.w_pen, self.w_mob)
+        weights_active(self.w_pc, self.w_pen, self.w_mob)
     }
 
     /// The engine's joint motion (an unknown name, impossible after [`validate`], is NAP's).
@@ -599,11 +594,11 @@ pub fn validate(
             ));
         }
         (_, None) => 0.0,
-        (requested, Some(_)) => category_guidance(requested, loss_guided(w_pc, w_pen, w_mob)),
+        (requested, Some(_)) => category_guidance(requested, weights_active(w_pc, w_pen, w_mob)),
     };
     let category_guidance_below = category_guidance_below(
         input.category_guidance_below.map(|b| b as usize),
-        loss_guided(w_pc, w_pen, w_mob),
+        weights_active(w_pc, w_pen, w_mob),
     );
     if !(1..=NUM_STEPS).contains(&category_guidance_below) {
         return Err(violation(

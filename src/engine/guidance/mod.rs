@@ -258,8 +258,15 @@ impl GuidanceOptions {
 
     /// Whether any term has a positive weight.
     pub fn is_active(&self) -> bool {
-        self.w_pc > 0.0 || self.w_pen > 0.0 || self.w_mob > 0.0
+        weights_active(self.w_pc, self.w_pen, self.w_mob)
     }
+}
+
+/// Whether loss weights guide a sample (some weight > 0); false = plain NAP sampling. The one
+/// rule behind [`GuidanceOptions::is_active`], the service's validation and the evaluations'
+/// per-row defaults.
+pub fn weights_active(w_pc: f64, w_pen: f64, w_mob: f64) -> bool {
+    w_pc > 0.0 || w_pen > 0.0 || w_mob > 0.0
 }
 
 /// Loss values of one guided step, summed over the batch (unweighted terms).

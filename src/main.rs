@@ -453,6 +453,11 @@ struct DiffusionArgs {
     /// high noise up to the cap; 1 = off (NAP).
     #[arg(long, env = "PHYSNAP_DIFFUSION_HIGH_NOISE_CAP", default_value_t = 1.0)]
     high_noise_cap: f64,
+    /// Slices each step's batch is split into, their passes run in parallel (one per core is
+    /// the point; results depend on this number, not on the thread count; 1 = the single-pass
+    /// step of runs before 2026-11-28).
+    #[arg(long, env = "PHYSNAP_DIFFUSION_BATCH_SHARDS", default_value_t = 2)]
+    batch_shards: usize,
     /// Where the optimiser steps run: `cpu`, or `gpu` / `gpu:N` (Vulkan) in a binary built with
     /// `--features gpu`.
     #[arg(long, env = "PHYSNAP_TRAIN_DEVICE", default_value = "cpu")]

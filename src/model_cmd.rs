@@ -269,6 +269,7 @@ pub fn diffusion(a: DiffusionArgs) -> anyhow::Result<()> {
         stop_at: a.stop_at,
         min_snr_gamma: a.min_snr_gamma,
         high_noise_cap: a.high_noise_cap,
+        batch_shards: a.batch_shards,
         compute,
         ..DiffusionTrainConfig::default()
     };

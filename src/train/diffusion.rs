@@ -52,6 +52,12 @@
 //! weights are checkpointed beside it as `denoiser_raw.safetensors` so training can continue.
 //! `ema_decay = 0` turns the EMA off (the file then holds the raw weights).
 //!
+//! Both cores: each step's batch is split into `batch_shards` slices (default 2) whose forward
+//! and backward passes run in parallel on the rayon pool, each slice's loss weighted by its
+//! share of the batch, so the summed gradient is the batch's (up to float rounding). With one
+//! shard the step is the single-pass one of the runs before 2026-11-28, bit for bit; a run is
+//! deterministic for a given shard count on any number of threads.
+//!
 //! Reproducibility and resume: step s draws everything from `Rng::fork(seed, s)`, so a resumed
 //! run sees exactly the batches and noise of an uninterrupted one. Checkpoints
 //! (`denoiser.safetensors`, `denoiser_raw.safetensors` + `checkpoint.json`) are written every
@@ -115,6 +121,9 @@ pub struct DiffusionTrainConfig {
     /// Capped truncated-SNR weighting of the high-noise steps: each sample's ε-loss is also
     /// weighted by `clamp(1 / SNR(t), 1, cap)`. 1 (or less) = off (NAP's unweighted loss).
     pub high_noise_cap: f64,
+    /// Shards each step's batch is split into: their forward and backward passes run in
+    /// parallel on the rayon pool and their gradients are summed (see the module documentation).
+    pub batch_shards: usize,
     /// Where the optimiser steps run.
     pub compute: Compute,
 }
@@ -169,6 +178,7 @@ impl Default for DiffusionTrainConfig {
             stop_at: None,
             min_snr_gamma: 0.0,
             high_noise_cap: 1.0,
+            batch_shards: 2,
             compute: Compute::Cpu,
         }
     }
@@ -318,6 +328,89 @@ pub fn grouped_loss_per_sample(
     (node + edge).reshape([b])
 }
 
+/// One step's noised batch: inputs, targets and per-sample loss weights.
+struct ShardBatch {
+    vt: Tensor<3>,
+    et: Tensor<3>,
+    t: Tensor<1, Int>,
+    category: Option<Tensor<1, Int>>,
+    eps_v: Tensor<3>,
+    eps_e: Tensor<3>,
+    weights: Option<Tensor<1>>,
+}
+
+impl ShardBatch {
+    /// Samples `start..start + len` of the batch.
+    fn slice(&self, start: usize, len: usize) -> ShardBatch {
+        ShardBatch {
+            vt: self.vt.clone().narrow(0, start, len),
+            et: self.et.clone().narrow(0, start, len),
+            t: self.t.clone().narrow(0, start, len),
+            category: self.category.as_ref().map(|c| c.clone().narrow(0, start, len)),
+            eps_v: self.eps_v.clone().narrow(0, start, len),
+            eps_e: self.eps_e.clone().narrow(0, start, len),
+            weights: self.weights.as_ref().map(|w| w.clone().narrow(0, start, len)),
+        }
+    }
+}
+
+/// The batch's loss and its gradients, computed in `shards` contiguous slices of (nearly)
+/// equal size. Each slice runs on its own fork of the model (fresh autodiff leaves, the same
+/// parameter ids, so the slices' graphs never merge under burn's one-mutex-per-graph client)
+/// and in parallel on the rayon pool; its loss is weighted by its share of the batch, so the
+/// sum of the slices' losses and gradients is the whole batch's mean loss and its gradient, up
+/// to float rounding. The gradients are summed in slice order whatever the thread timing, so
+/// a run is deterministic for a given `shards` on any number of threads. The loss guard
+/// clamps each slice's mean instead of the batch's (it never bites in practice: |L| ≪ 100).
+fn sharded_step(
+    model: &Denoiser,
+    batch: ShardBatch,
+    shards: usize,
+    device: &burn::tensor::Device,
+) -> (f64, GradientsParams) {
+    use rayon::prelude::*;
+    let bsz = batch.vt.dims()[0];
+    let shards = shards.clamp(1, bsz);
+    let run = |m: &Denoiser, b: ShardBatch, share: Option<f32>| {
+        let (pv, pe) = m.forward(b.vt, b.et, b.t, b.category);
+        let mut loss = grouped_loss(pv, pe, b.eps_v, b.eps_e, b.weights);
+        if let Some(share) = share {
+            loss = loss * share;
+        }
+        let value: f64 = loss
+            .clone()
+            .into_data()
+            .try_to_vec::<f32>()
+            .map(|v| v[0] as f64)
+            .unwrap_or(f64::NAN);
+        (value, GradientsParams::from_grads(loss.backward(), m))
+    };
+    if shards == 1 {
+        return run(model, batch, None);
+    }
+    let parts: Vec<(Denoiser, ShardBatch, f32)> = (0..shards)
+        .map(|k| {
+            let (start, end) = (k * bsz / shards, (k + 1) * bsz / shards);
+            (
+                model.clone().fork(device),
+                batch.slice(start, end - start),
+                (end - start) as f32 / bsz as f32,
+            )
+        })
+        .collect();
+    let results: Vec<(f64, GradientsParams)> = parts
+        .into_par_iter()
+        .map(|(m, b, share)| run(&m, b, Some(share)))
+        .collect();
+    let mut acc = burn::optim::GradientsAccumulator::<Denoiser>::new();
+    let mut value = 0.0;
+    for (v, g) in results {
+        value += v;
+        acc.accumulate(model, g);
+    }
+    (value, acc.grads())
+}
+
 /// What the run did.
 #[derive(Debug, Clone)]
 pub struct DiffusionTrainReport {
@@ -409,6 +502,12 @@ pub fn train_diffusion(
             cfg.high_noise_cap.is_finite() && cfg.high_noise_cap <= 1e6,
             "finite and at most 1e6 (1 or less = off)",
             cfg.high_noise_cap.to_string(),
+        ),
+        (
+            "batch_shards",
+            (1..=cfg.batch_objects * cfg.noise_levels).contains(&cfg.batch_shards),
+            "within 1..=batch_objects × noise_levels",
+            cfg.batch_shards.to_string(),
         ),
         (
             "stop_at",
@@ -521,18 +620,19 @@ pub fn train_diffusion(
                 &device,
             )
         });
-        let (pv, pe) = model.forward(vt, et, t, category);
-        let loss = grouped_loss(pv, pe, eps_v, eps_e, weights);
-        let value: f64 = loss
-            .clone()
-            .into_data()
-            .try_to_vec::<f32>()
-            .map(|v| v[0] as f64)
-            .unwrap_or(f64::NAN);
+        let batch = ShardBatch {
+            vt,
+            et,
+            t,
+            category,
+            eps_v,
+            eps_e,
+            weights,
+        };
+        let (value, grads) = sharded_step(&model, batch, cfg.batch_shards, &device);
         if !value.is_finite() {
             return Err(TrainError::Diverged { step, loss: value });
         }
-        let grads = GradientsParams::from_grads(loss.backward(), &model);
         model = optim.step(cfg.lr_at(step), model, grads);
         if let Some(shadow) = shadow.as_mut() {
             shadow.update(&model);
@@ -585,6 +685,7 @@ pub fn train_diffusion(
         "ema_decay": cfg.ema_decay, "ema_steps": shadow.as_ref().map_or(0, |e| e.steps),
         "seed": cfg.seed, "category_dropout": cfg.category_dropout,
         "min_snr_gamma": cfg.min_snr_gamma, "high_noise_cap": cfg.high_noise_cap,
+        "batch_shards": cfg.batch_shards,
         "feature_scales": { "node": data.scales.node, "edge": data.scales.edge },
         "categories": CATEGORIES.to_vec(), "train_objects": data.graphs.len(), "sha256": sha,
     });
@@ -666,6 +767,7 @@ mod tests {
             stop_at: None,
             min_snr_gamma: 0.0,
             high_noise_cap: 1.0,
+            batch_shards: 2,
             compute: crate::model::Compute::Cpu,
         }
     }
@@ -770,6 +872,57 @@ mod tests {
             ..tiny_config(10)
         });
         assert!(e.contains("high_noise_cap") && e.contains("inf"), "{e}");
+        let e = err(DiffusionTrainConfig {
+            batch_shards: 9,
+            ..tiny_config(10)
+        });
+        assert!(
+            e.contains("batch_shards") && e.contains("9") && e.contains("batch_objects"),
+            "{e}"
+        );
+    }
+
+    /// A safetensors file's tensor bytes (after its JSON header, whose `__metadata__` keys
+    /// burn writes in hash order, so two saves of the same weights can differ there).
+    fn tensor_data(file: &[u8]) -> &[u8] {
+        let n = u64::from_le_bytes(file[..8].try_into().unwrap()) as usize;
+        &file[8 + n..]
+    }
+
+    #[test]
+    fn sharded_steps_match_the_single_pass_and_are_deterministic() {
+        // Two or three slices in parallel give the whole batch's loss and gradient up to float
+        // rounding, so a short run tracks the single-pass one closely; and a sharded run
+        // repeats bit for bit (the gradients are summed in slice order).
+        let data = tiny_data();
+        let run = |shards: usize| {
+            let dir = tempfile::tempdir().unwrap();
+            let mut losses = Vec::new();
+            let cfg = DiffusionTrainConfig {
+                batch_shards: shards,
+                ema_decay: 0.0,
+                ..tiny_config(8)
+            };
+            let r = train_diffusion(&data, &cfg, dir.path(), false, &mut |p| {
+                losses.push(p.loss)
+            })
+            .unwrap();
+            (losses, std::fs::read(r.weights).unwrap())
+        };
+        let (one, w1) = run(1);
+        let (two, w2) = run(2);
+        let (three, _) = run(3);
+        for (k, ((a, b), c)) in one.iter().zip(&two).zip(&three).enumerate() {
+            assert!((a - b).abs() <= 1e-4 * a.abs(), "step {k}: {a} vs {b} (2 shards)");
+            assert!((a - c).abs() <= 1e-4 * a.abs(), "step {k}: {a} vs {c} (3 shards)");
+        }
+        assert!(
+            tensor_data(&w1) != tensor_data(&w2),
+            "two shards should round differently from one pass"
+        );
+        let (again, w2b) = run(2);
+        assert_eq!(two, again);
+        assert!(tensor_data(&w2) == tensor_data(&w2b), "the repeated run's weights differ");
     }
 
     #[test]

@@ -455,7 +455,8 @@ struct DiffusionArgs {
     high_noise_cap: f64,
     /// Slices each step's batch is split into, their passes run in parallel (one per core is
     /// the point; results depend on this number, not on the thread count; 1 = the single-pass
-    /// step of runs before 2026-11-28).
+    /// step of runs before 2026-11-28). Measured on the CPU only: with `--device gpu` the
+    /// slices share the one device, so 1 is likely the better choice there.
     #[arg(long, env = "PHYSNAP_DIFFUSION_BATCH_SHARDS", default_value_t = 2)]
     batch_shards: usize,
     /// Where the optimiser steps run: `cpu`, or `gpu` / `gpu:N` (Vulkan) in a binary built with

@@ -346,10 +346,16 @@ impl ShardBatch {
             vt: self.vt.clone().narrow(0, start, len),
             et: self.et.clone().narrow(0, start, len),
             t: self.t.clone().narrow(0, start, len),
-            category: self.category.as_ref().map(|c| c.clone().narrow(0, start, len)),
+            category: self
+                .category
+                .as_ref()
+                .map(|c| c.clone().narrow(0, start, len)),
             eps_v: self.eps_v.clone().narrow(0, start, len),
             eps_e: self.eps_e.clone().narrow(0, start, len),
-            weights: self.weights.as_ref().map(|w| w.clone().narrow(0, start, len)),
+            weights: self
+                .weights
+                .as_ref()
+                .map(|w| w.clone().narrow(0, start, len)),
         }
     }
 }
@@ -903,18 +909,22 @@ mod tests {
                 ema_decay: 0.0,
                 ..tiny_config(8)
             };
-            let r = train_diffusion(&data, &cfg, dir.path(), false, &mut |p| {
-                losses.push(p.loss)
-            })
-            .unwrap();
+            let r = train_diffusion(&data, &cfg, dir.path(), false, &mut |p| losses.push(p.loss))
+                .unwrap();
             (losses, std::fs::read(r.weights).unwrap())
         };
         let (one, w1) = run(1);
         let (two, w2) = run(2);
         let (three, _) = run(3);
         for (k, ((a, b), c)) in one.iter().zip(&two).zip(&three).enumerate() {
-            assert!((a - b).abs() <= 1e-4 * a.abs(), "step {k}: {a} vs {b} (2 shards)");
-            assert!((a - c).abs() <= 1e-4 * a.abs(), "step {k}: {a} vs {c} (3 shards)");
+            assert!(
+                (a - b).abs() <= 1e-4 * a.abs(),
+                "step {k}: {a} vs {b} (2 shards)"
+            );
+            assert!(
+                (a - c).abs() <= 1e-4 * a.abs(),
+                "step {k}: {a} vs {c} (3 shards)"
+            );
         }
         assert!(
             tensor_data(&w1) != tensor_data(&w2),
@@ -922,7 +932,10 @@ mod tests {
         );
         let (again, w2b) = run(2);
         assert_eq!(two, again);
-        assert!(tensor_data(&w2) == tensor_data(&w2b), "the repeated run's weights differ");
+        assert!(
+            tensor_data(&w2) == tensor_data(&w2b),
+            "the repeated run's weights differ"
+        );
     }
 
     #[test]

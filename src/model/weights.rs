@@ -4,7 +4,8 @@
 //! describes, and fail clearly otherwise (a truncated download, a config that does not fit).
 //! Saving goes through burn's `SafetensorsStore` into memory, then an atomic write; loading
 //! verifies the sha256 first, then applies the tensors and refuses missing, unused or
-//! mis-shaped tensors. f32 tensors round-trip bit-exactly.
+//! mis-shaped tensors. f32 tensors round-trip bit-exactly, and equal weights give byte-equal
+//! files (the header's metadata is written in sorted order), so equal weights hash alike.
 
 use std::path::Path;
 
@@ -61,7 +62,59 @@ pub fn to_bytes<M: Module + ModuleSnapshot>(module: &M) -> Result<Vec<u8>, Weigh
         detail: e.to_string(),
     };
     module.save_into(&mut store).map_err(|e| err(&e))?;
-    store.get_bytes().map_err(|e| err(&e))
+    let mut bytes = store.get_bytes().map_err(|e| err(&e))?;
+    sort_metadata(&mut bytes);
+    Ok(bytes)
+}
+
+/// Put the `__metadata__` entries of a safetensors header in sorted order, in place.
+///
+/// burn 0.22.1 writes them (`producer`, `format`, `version`) from a hash map, so two saves of
+/// the same weights could differ in these bytes and so in their sha256. Sorting makes equal
+/// weights give equal files. The entries are flat `"key":"value"` strings; anything else (a
+/// comma or brace inside a value, no metadata) leaves the bytes untouched, and the header's
+/// length never changes, so the tensors' offsets stay valid.
+fn sort_metadata(bytes: &mut [u8]) {
+    const KEY: &[u8] = b"\"__metadata__\":{";
+    let Some(len) = bytes
+        .get(..8)
+        .map(|b| u64::from_le_bytes(b.try_into().unwrap_or_default()))
+    else {
+        return;
+    };
+    let Some(header) = usize::try_from(len)
+        .ok()
+        .and_then(|n| bytes.get_mut(8..8 + n))
+    else {
+        return;
+    };
+    let Some(start) = header
+        .windows(KEY.len())
+        .position(|w| w == KEY)
+        .map(|i| i + KEY.len())
+    else {
+        return;
+    };
+    let Some(end) = header[start..]
+        .iter()
+        .position(|&b| b == b'}')
+        .map(|i| start + i)
+    else {
+        return;
+    };
+    let Ok(inner) = std::str::from_utf8(&header[start..end]) else {
+        return;
+    };
+    let mut entries: Vec<&str> = inner.split(',').collect();
+    if entries
+        .iter()
+        .any(|e| e.matches('"').count() != 4 || !e.starts_with('"') || e.contains('{'))
+    {
+        return;
+    }
+    entries.sort_unstable();
+    let sorted = entries.join(",");
+    header[start..end].copy_from_slice(sorted.as_bytes());
 }
 
 /// Save a module to `path` (atomically); returns the file's sha256.
@@ -193,6 +246,29 @@ mod tests {
         // Truncated file without a checksum: refused as not loadable.
         std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
         assert!(super::load(&mut tiny(8), &path, None).is_err());
+    }
+
+    #[test]
+    fn equal_weights_give_equal_files() {
+        // burn writes the header's metadata from a hash map; save sorts it, so the same
+        // weights always hash alike (the order differed between saves before).
+        let m = tiny(8);
+        let first = super::to_bytes(&m).unwrap();
+        for _ in 0..8 {
+            assert_eq!(super::to_bytes(&m).unwrap(), first);
+        }
+        let n = u64::from_le_bytes(first[..8].try_into().unwrap()) as usize;
+        let header = std::str::from_utf8(&first[8..8 + n]).unwrap();
+        assert!(
+            header.starts_with(
+                r#"{"__metadata__":{"format":"safetensors","producer":"burn","version":"#
+            ),
+            "{header}"
+        );
+        // Bytes that are not a safetensors header are left alone.
+        let mut junk = vec![1u8, 2, 3];
+        super::sort_metadata(&mut junk);
+        assert_eq!(junk, [1, 2, 3]);
     }
 
     #[test]

@@ -3,37 +3,46 @@
 #
 #   bash scripts/reproduce-weights.sh [OUT]        # default OUT: repro
 #
-# data synth -> data import -> train shape -> train diffusion (two runs, exactly how the
-# shipped denoiser was trained: 2,000 steps at a constant learning rate, then --resume with a
-# cosine decay and a weight EMA to 7,000 steps; the denoiser adds its category to every graph
-# layer, --category-layers) -> retrieval codebook (written by train diffusion) -> two more
-# cosine cycles of the shape prior's decoder with its encoder frozen and an eikonal term
-# (train shape --init-from OUT/weights --freeze-encoder --eikonal 0.01 at lr 5e-4, seeds 0
-# and 1; the shipped decoder since 2026-11-27), each installed with train install-shape (the
-# codes, and so the denoiser, stay valid) -> eval shape and eval generative --write-manifest.
-# OUT/weights is then a drop-in replacement for weights/.
-# About 2 h 40–48 min on 2 idle cores with the evaluations, 2 h 28–36 min without (BENCHMARKS.md
-# "Training the shipped weights"), of which each decoder cycle is about 27 min
-# (DECODER_CYCLES=1: the recipe of the first 2026-11-27 weights; DECODER_STEPS=0 or
-# DECODER_CYCLES=0: no cycle, the recipe before 2026-11-27).
+# data synth -> data import -> train shape (12,000 steps, 128 parts x 128 queries x 64 surface
+# points a batch, host backward pass) -> train diffusion (two runs, exactly how the shipped
+# denoiser was trained: 2,000 steps at a constant learning rate, then --resume with a cosine
+# decay and a weight EMA to 7,000 steps; the denoiser adds its category to every graph layer,
+# --category-layers) -> retrieval codebook (written by train diffusion) -> two more cosine
+# cycles of the shape prior's decoder with its encoder frozen and an eikonal term (train shape
+# --init-from OUT/weights --freeze-encoder at lr 5e-4: cycle 1 seed 0 eikonal 0.01, cycle 2
+# seed 1 eikonal 0.03), each installed with train install-shape (the codes, and so the
+# denoiser, stay valid) -> eval shape and eval generative --write-manifest.
+# OUT/weights is then a drop-in replacement for weights/ (the weights shipped since 2026-11-28;
+# weights/README.md "How they were made").
+# About 3 h 25 min on 2 idle cores without the evaluations, ≈ 3 h 45 min with them, summed
+# from the runs that made the shipped files (BENCHMARKS.md "Training the shipped weights"):
+# the first prior 84 min, the denoiser ≈ 70 min (DENOISER_SHARDS=2: ≈ 35 min), each decoder
+# cycle ≈ 22 min, each codebook ≈ 1-2 min.
 #
 # Knobs (environment; the defaults are the shipped recipe, smaller values make a smoke run):
 #   PHYSNAP_BIN   physnap binary (default: cargo build --release, then target/release/physnap)
-#   OBJECTS (3000)  SHAPE_STEPS (3000)  STAGE1 (2000)  STAGE2 (0: no stop between; N: a third run
-#   resumed at N, as the weights shipped before 2026-11-26 were made)  STEPS (7000)
-#   BATCH_OBJECTS (16)  CHECKPOINT_EVERY (500)  IMPORT_FLAGS ("")  SHAPE_FLAGS ("")
-#   DENOISER_FLAGS ("")  DECODER_STEPS (3000, as shipped; 0: no decoder cycle)
-#   DECODER_CYCLES (2, as shipped; 0: none)
-#   SHAPE_BACKWARD (burn, as shipped: how the first shape prior's decoder gradients are computed;
-#   host: the trainer's default, the same gradients up to float rounding, ≈ 1.6x faster per step)
-#   DECODER_FLAGS ("--eikonal 0.01", as shipped; set it empty for the plain cycle, which raises
-#   the shape IoU more, 0.621 against 0.588, but aligns guided fits worse, EVALUATION.md)
-#   EVAL (1: run eval generative; 0: skip)
+#   OBJECTS (3000)  SHAPE_STEPS (12000)  STAGE1 (2000)  STAGE2 (0: no stop between; N: a third
+#   run resumed at N)  STEPS (7000)  BATCH_OBJECTS (16)  CHECKPOINT_EVERY (500)
+#   IMPORT_FLAGS ("")  SHAPE_FLAGS ("", added to every train shape)  DENOISER_FLAGS ("")
+#   SHAPE_BATCH ("--batch-parts 128 --queries-per-part 128 --surface-points 64": the batch of
+#   the first prior and of every decoder cycle; "" gives train shape's defaults, 16 x 2048 x 512,
+#   the recipe of the weights shipped before 2026-11-28)
+#   SHAPE_BACKWARD (host, as shipped: how the first prior's decoder gradients are computed;
+#   burn: burn's autodiff, the same gradients up to float rounding, ≈ 1.6x slower per step)
+#   DENOISER_SHARDS (1, as shipped: the denoiser's exact step; 2: each step's batch in two
+#   slices on two cores, ≈ 2.1x faster, the same loss up to float rounding)
+#   DECODER_STEPS (3000; 0: no decoder cycle)  DECODER_CYCLES (2; 0: none)
+#   DECODER_EIKONAL ("0.01 0.03": the eikonal weight of each cycle, one value per cycle; 0 is
+#   the plain cycle, which raises the shape IoU more but aligns guided fits worse, EVALUATION.md)
+#   DECODER_FLAGS ("": more flags for every decoder cycle)
+#   EVAL (1: run eval shape and eval generative; 0: skip)
+# The weights shipped 2026-11-27 (docs/eval/recipe128/v5r2/previous_manifest.json):
+#   SHAPE_STEPS=3000 SHAPE_BATCH="" SHAPE_BACKWARD=burn DECODER_EIKONAL="0.01 0.01"
 set -euo pipefail
 
 OUT=${1:-repro}
 OBJECTS=${OBJECTS:-3000}
-SHAPE_STEPS=${SHAPE_STEPS:-3000}
+SHAPE_STEPS=${SHAPE_STEPS:-12000}
 STAGE1=${STAGE1:-2000}
 STAGE2=${STAGE2:-0}
 STEPS=${STEPS:-7000}
@@ -43,13 +52,31 @@ IMPORT_FLAGS=${IMPORT_FLAGS:-}
 SHAPE_FLAGS=${SHAPE_FLAGS:-}
 DENOISER_FLAGS=${DENOISER_FLAGS:-}
 DECODER_STEPS=${DECODER_STEPS:-3000}
-DECODER_FLAGS=${DECODER_FLAGS-"--eikonal 0.01"}
+DECODER_FLAGS=${DECODER_FLAGS:-}
 DECODER_CYCLES=${DECODER_CYCLES:-2}
-SHAPE_BACKWARD=${SHAPE_BACKWARD:-burn}
+DECODER_EIKONAL=${DECODER_EIKONAL-"0.01 0.03"}
+SHAPE_BATCH=${SHAPE_BATCH-"--batch-parts 128 --queries-per-part 128 --surface-points 64"}
+SHAPE_BACKWARD=${SHAPE_BACKWARD:-host}
+DENOISER_SHARDS=${DENOISER_SHARDS:-1}
 EVAL=${EVAL:-1}
 
 if ! [[ "$DECODER_CYCLES" =~ ^[0-9]+$ ]]; then
   echo "invalid DECODER_CYCLES: need a whole number of decoder cycles (0 for none), got '$DECODER_CYCLES'" >&2
+  exit 2
+fi
+read -r -a eikonal <<< "$DECODER_EIKONAL"
+for w in "${eikonal[@]}"; do
+  if ! [[ "$w" =~ ^[0-9]*\.?[0-9]+$ ]]; then
+    echo "invalid DECODER_EIKONAL: need one non-negative number per decoder cycle, got '$w' in '$DECODER_EIKONAL'" >&2
+    exit 2
+  fi
+done
+if [ "$DECODER_STEPS" != 0 ] && [ "${#eikonal[@]}" != "$DECODER_CYCLES" ]; then
+  echo "invalid DECODER_EIKONAL: need one eikonal weight per decoder cycle ($DECODER_CYCLES), got ${#eikonal[@]}: '$DECODER_EIKONAL'" >&2
+  exit 2
+fi
+if ! [[ "$DENOISER_SHARDS" =~ ^[1-9][0-9]*$ ]]; then
+  echo "invalid DENOISER_SHARDS: need a whole number of batch slices, at least 1, got '$DENOISER_SHARDS'" >&2
   exit 2
 fi
 if [ "$SHAPE_BACKWARD" != burn ] && [ "$SHAPE_BACKWARD" != host ]; then
@@ -79,16 +106,15 @@ start=$(date +%s)
 run data synth --out "$OUT/synth" --objects "$OBJECTS" --seed 0
 # shellcheck disable=SC2086
 run data import --partnet-mobility "$OUT/synth" --out "$OUT/train" $IMPORT_FLAGS
-# The shipped shape prior was trained with burn's autodiff through the decoder; the default
-# host backward pass gives the same gradients up to float rounding and is ≈ 1.6x faster per
-# step, but rounding differences grow over training, so the recipe names the shipped path
-# (SHAPE_BACKWARD=host trades that for speed).
+# The shipped shape prior's decoder gradients came from the host backward pass (train shape's
+# default); burn's autodiff gives the same gradients up to float rounding, but rounding
+# differences grow over training, so the recipe names the shipped path.
 # shellcheck disable=SC2086
 run train shape --data "$OUT/train" --out "$OUT/shape" --steps "$SHAPE_STEPS" --seed 0 \
-  --decoder-backward "$SHAPE_BACKWARD" $SHAPE_FLAGS
+  --decoder-backward "$SHAPE_BACKWARD" $SHAPE_BATCH $SHAPE_FLAGS
 common=(--data "$OUT/train" --shape "$OUT/shape" --out "$OUT/weights"
         --batch-objects "$BATCH_OBJECTS" --noise-levels 4 --lr 5e-4
-        --checkpoint-every "$CHECKPOINT_EVERY" --category-layers)
+        --checkpoint-every "$CHECKPOINT_EVERY" --category-layers --batch-shards "$DENOISER_SHARDS")
 # Stage 1: constant learning rate, no EMA.
 # shellcheck disable=SC2086
 run train diffusion "${common[@]}" --steps "$STAGE1" --lr-final-factor 1 --ema-decay 0 $DENOISER_FLAGS
@@ -105,13 +131,17 @@ if [ "$DECODER_STEPS" != 0 ]; then
   # The decoder limits the shape IoU most (EVALUATION.md); further cycles with the encoder
   # frozen improve it while every code, and so the denoiser just trained, stays valid. The
   # eikonal term keeps the decoder's field steep where guidance moves the codes: without it
-  # guided scan completion aligns worse. Cycle i uses seed i - 1 (its query draws) and starts
-  # from the decoder the previous cycle installed.
+  # guided scan completion aligns worse. After the first cycle (0.01) the 12,000-step prior's
+  # fields are still flatter near the surface than its meshes (sqrt(E_pc)/D_pc 0.74 on guided
+  # fits, against 0.94 for the weights before) and fits align 15 % worse; the second, stronger
+  # cycle (0.03) brings that back to 0.92 (EVALUATION.md). Cycle i uses seed i - 1 (its query
+  # draws), the i-th DECODER_EIKONAL weight, and starts from the decoder the previous cycle
+  # installed.
   for ((cycle = 1; cycle <= DECODER_CYCLES; cycle++)); do
     # shellcheck disable=SC2086
     run train shape --data "$OUT/train" --out "$OUT/shape_decoder$cycle" --steps "$DECODER_STEPS" \
-      --seed $((cycle - 1)) --init-from "$OUT/weights" --freeze-encoder --lr 5e-4 $SHAPE_FLAGS \
-      $DECODER_FLAGS
+      --seed $((cycle - 1)) --init-from "$OUT/weights" --freeze-encoder --lr 5e-4 \
+      --eikonal "${eikonal[$((cycle - 1))]}" $SHAPE_BATCH $SHAPE_FLAGS $DECODER_FLAGS
     run train install-shape --shape "$OUT/shape_decoder$cycle" --weights "$OUT/weights"
   done
 fi

@@ -797,7 +797,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             .env("BATCH_OBJECTS", "2")
             .env("CHECKPOINT_EVERY", "1")
             .env("IMPORT_FLAGS", "--uniform 256 --near 256 --surface 64")
-            .env("SHAPE_FLAGS", "--batch-parts 4")
+            .env("SHAPE_BATCH", "--batch-parts 4 --queries-per-part 64")
             .env("DENOISER_FLAGS", "--width 32 --layers 1")
             .env("DECODER_STEPS", "2")
             .env("EVAL", "0")
@@ -853,17 +853,30 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         m["training"]["shape_base"]["config"]["freeze_encoder"], false,
         "{m:#}"
     );
-    // The first prior's decoder gradients come from burn's autodiff by default, as shipped.
+    // The first prior's decoder gradients come from the host backward pass by default, as
+    // shipped, and SHAPE_BATCH sets the batch of the prior and of every cycle.
     assert_eq!(
-        m["training"]["shape_base"]["config"]["decoder_backward"], "burn",
+        m["training"]["shape_base"]["config"]["decoder_backward"], "host",
         "{m:#}"
+    );
+    for stage in ["shape_base", "shape"] {
+        assert_eq!(
+            m["training"][stage]["config"]["queries_per_part"], 64,
+            "{stage}: {m:#}"
+        );
+    }
+    // The denoiser takes the shipped denoiser's exact step by default (one batch slice).
+    assert!(
+        err.contains("--batch-shards 1"),
+        "the recipe's denoiser runs name their step: {err}"
     );
     let cycles = m["training"]["shape_cycles"].as_array().unwrap();
     assert_eq!(cycles.len(), 1, "{m:#}");
     assert_eq!(cycles[0]["config"]["seed"], 0, "{m:#}");
     assert_eq!(cycles[0]["config"]["freeze_encoder"], true, "{m:#}");
-    // With the eikonal term, as the shipped decoder was trained.
-    assert_eq!(m["training"]["shape"]["config"]["eikonal"], 0.01, "{m:#}");
+    // Each cycle with its own eikonal weight, as the shipped decoder was trained: 0.01, 0.03.
+    assert_eq!(cycles[0]["config"]["eikonal"], 0.01, "{m:#}");
+    assert_eq!(m["training"]["shape"]["config"]["eikonal"], 0.03, "{m:#}");
     // Bad knobs are refused (exit 2, naming the knob and the value) before anything runs.
     let bad = root.path().join("bad");
     for (knobs, expect) in [
@@ -873,6 +886,9 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         ),
         (&[("DECODER_CYCLES", "two")][..], "DECODER_CYCLES"),
         (&[("SHAPE_BACKWARD", "fast")][..], "SHAPE_BACKWARD"),
+        (&[("DECODER_EIKONAL", "0.01 strong")][..], "strong"),
+        (&[("DECODER_EIKONAL", "0.01")][..], "DECODER_EIKONAL"),
+        (&[("DENOISER_SHARDS", "0")][..], "DENOISER_SHARDS"),
     ] {
         let o = Command::new("bash")
             .arg(concat!(
@@ -892,9 +908,19 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     }
 
     // STAGE2=0: two denoiser runs, the second resuming at STAGE1 and running to STEPS; the
-    // first prior with the host backward pass (SHAPE_BACKWARD=host).
+    // first prior with burn's autodiff (SHAPE_BACKWARD=burn), the denoiser on two batch
+    // slices, one plain decoder cycle.
     let two = root.path().join("two");
-    let o = repro(&two, ["2", "0", "4"], &[("SHAPE_BACKWARD", "host")]);
+    let o = repro(
+        &two,
+        ["2", "0", "4"],
+        &[
+            ("SHAPE_BACKWARD", "burn"),
+            ("DENOISER_SHARDS", "2"),
+            ("DECODER_CYCLES", "1"),
+            ("DECODER_EIKONAL", "0"),
+        ],
+    );
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     assert_eq!(err.matches("+ physnap train diffusion").count(), 2, "{err}");
@@ -904,9 +930,12 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         (&serde_json::json!(4), &serde_json::json!(2)),
         "{summary:#}"
     );
+    assert!(err.contains("--batch-shards 2"), "{err}");
     let m = read(&two.join("weights/manifest.json"));
     assert_eq!(
-        m["training"]["shape_base"]["config"]["decoder_backward"], "host",
+        m["training"]["shape_base"]["config"]["decoder_backward"], "burn",
         "{m:#}"
     );
+    assert_eq!(m["training"]["shape"]["config"]["eikonal"], 0.0, "{m:#}");
+    assert!(m["training"]["shape_cycles"].is_null(), "one cycle: {m:#}");
 }

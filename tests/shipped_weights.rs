@@ -114,8 +114,8 @@ fn the_shipped_codebook_retrieves_non_empty_shapes() {
     }
 }
 
-/// Meshing decodes only near the surface (`mesh::sampling`), which is exact while the decoder
-/// is 2-Lipschitz. On shipped codebook shapes at the default 64³ grid: every grid point has the
+/// Meshing decodes only near the surface (`mesh::sampling`), which is exact while the decoder's
+/// slopes stay below `LIPSCHITZ_MARGIN`. On shipped codebook shapes at the default 64³ grid: every grid point has the
 /// dense grid's sign, every cell the surface crosses has the dense grid's exact corner values
 /// (so marching cubes returns the dense mesh), and the decoder's largest finite-difference
 /// slope between neighbouring grid points stays below the margin the skipping assumes.
@@ -171,8 +171,13 @@ fn sparse_meshing_of_shipped_shapes_equals_the_dense_grid() {
         "steepest slope {steepest:.3}; decoded {evaluated} of {total} points ({:.1} %)",
         100.0 * evaluated as f64 / total as f64
     );
-    assert!(steepest < LIPSCHITZ_MARGIN, "steepest slope {steepest}");
-    assert!(evaluated * 3 < total, "decoded {evaluated} of {total}");
+    // Finite differences between grid points under-read the field's true slope, so the margin
+    // keeps 25 % above the steepest one seen.
+    assert!(
+        steepest * 1.25 < LIPSCHITZ_MARGIN,
+        "steepest slope {steepest} leaves the margin {LIPSCHITZ_MARGIN} less than 25 % headroom"
+    );
+    assert!(evaluated * 2 < total, "decoded {evaluated} of {total}");
 }
 
 /// An [`physnap::shape::Sdf`] that counts its evaluations.

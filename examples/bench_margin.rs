@@ -1,0 +1,119 @@
+//! Benchmark: what the sparse mesher's Lipschitz margin costs and whether it keeps the dense
+//! grid's mesh, on a weights directory's codebook shapes.
+//!
+//! `mesh::sampling` skips a block of grid cells when every corner satisfies |f(c)| > L·D/2
+//! (D the block's diagonal, L the assumed Lipschitz bound). This decodes each of N codebook
+//! shapes on the dense 64³ grid, records its steepest finite-difference slope between
+//! neighbouring grid points (a lower bound on L), then samples it sparsely at several margins
+//! and counts decodes and shapes whose sign pattern or crossed-cell corners differ from the
+//! dense grid (a differing mesh).
+//!
+//! Run: `cargo run --release --example bench_margin -- WEIGHTS_DIR [N]` (default: weights, 40).
+//! Figures: BENCHMARKS.md, docs/eval/recipe128/v5r2/lipschitz_margins.txt.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use physnap::io::manifest::load_models;
+use physnap::mesh::sampling::{LIPSCHITZ_MARGIN, sample_dense, sample_grid_with_margin};
+use physnap::mesh::{DEFAULT_RESOLUTION, DOMAIN_HALF};
+use physnap::model::shape_prior::LatentSdfDecoder;
+use physnap::shape::{LatentDecoder, Sdf};
+
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
+/// An [`Sdf`] that counts its evaluations.
+struct Counted<'a>(&'a dyn Sdf, AtomicUsize);
+
+impl Sdf for Counted<'_> {
+    fn eval_batch(&self, points: &[[f32; 3]], out: &mut [f32]) {
+        self.1.fetch_add(points.len(), Ordering::Relaxed);
+        self.0.eval_batch(points, out);
+    }
+}
+
+fn main() -> anyhow::Result<()> {
+    let mut args = std::env::args().skip(1);
+    let weights = PathBuf::from(args.next().unwrap_or_else(|| "weights".into()));
+    let n: usize = args.next().map_or(Ok(40), |s| s.parse())?;
+    let dev = physnap::model::cpu();
+    let models = load_models(&weights, &dev)?;
+    let codebook = models
+        .codebook
+        .as_ref()
+        .ok_or_else(|| anyhow::anyhow!("{}: no codebook", weights.display()))?;
+    let decoder = LatentSdfDecoder::new(&models.shape_prior.decoder);
+    let r = DEFAULT_RESOLUTION;
+    let m = r + 1;
+    let spacing = 2.0 * DOMAIN_HALF / r as f32;
+    let coord = |i: usize| -DOMAIN_HALF + spacing * i as f32;
+    let at = |x: usize, y: usize, z: usize| x + m * (y + m * z);
+    let margins = [2.0f32, 3.0, 4.0, 5.0, 6.0];
+    let mut decoded = vec![0usize; margins.len()];
+    let mut differing = vec![0usize; margins.len()];
+    let mut seconds = vec![0f64; margins.len()];
+    let mut slopes = Vec::new();
+    for i in (0..codebook.rows()).step_by((codebook.rows() / n.max(1)).max(1)) {
+        let sdf = decoder.sdf(codebook.row(i));
+        let dense = sample_dense(sdf.as_ref(), r, &coord);
+        let mut steepest = 0.0f32;
+        for z in 0..m {
+            for y in 0..m {
+                for x in 0..m {
+                    let d = dense[at(x, y, z)];
+                    for (nx, ny, nz) in [(x + 1, y, z), (x, y + 1, z), (x, y, z + 1)] {
+                        if nx < m && ny < m && nz < m {
+                            steepest = steepest.max((dense[at(nx, ny, nz)] - d).abs() / spacing);
+                        }
+                    }
+                }
+            }
+        }
+        slopes.push(steepest);
+        for (k, &margin) in margins.iter().enumerate() {
+            let counted = Counted(sdf.as_ref(), AtomicUsize::new(0));
+            let t = std::time::Instant::now();
+            let sparse = sample_grid_with_margin(&counted, r, spacing, &coord, margin);
+            seconds[k] += t.elapsed().as_secs_f64();
+            decoded[k] += counted.1.load(Ordering::Relaxed);
+            let mut same = true;
+            for z in 0..r {
+                for y in 0..r {
+                    for x in 0..r {
+                        let corners =
+                            (0..8).map(|c| at(x + (c & 1), y + (c >> 1 & 1), z + (c >> 2)));
+                        let neg = corners.clone().filter(|&c| dense[c] < 0.0).count();
+                        let sneg = corners.clone().filter(|&c| sparse[c] < 0.0).count();
+                        let crossed = neg != 0 && neg != 8;
+                        same &= neg == sneg
+                            && (!crossed || corners.clone().all(|c| sparse[c] == dense[c]));
+                    }
+                }
+            }
+            differing[k] += usize::from(!same);
+        }
+    }
+    slopes.sort_by(f32::total_cmp);
+    let total = (slopes.len() * m * m * m) as f64;
+    println!(
+        "{}: {} codebook shapes at {r}³; steepest neighbour slope median {:.2}, 90th percentile {:.2}, max {:.2}",
+        weights.display(),
+        slopes.len(),
+        slopes[slopes.len() / 2],
+        slopes[slopes.len() * 9 / 10],
+        slopes[slopes.len() - 1]
+    );
+    println!("| margin L | decoded, share of the dense grid | sparse sampling per shape (ms) | shapes whose mesh differs |");
+    println!("|---|---|---|---|");
+    for (k, margin) in margins.iter().enumerate() {
+        let mark = if *margin == LIPSCHITZ_MARGIN { " (the default)" } else { "" };
+        println!(
+            "| {margin}{mark} | {:.1} % | {:.0} | {} |",
+            100.0 * decoded[k] as f64 / total,
+            1000.0 * seconds[k] / slopes.len() as f64,
+            differing[k]
+        );
+    }
+    Ok(())
+}

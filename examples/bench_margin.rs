@@ -104,10 +104,16 @@ fn main() -> anyhow::Result<()> {
         slopes[slopes.len() * 9 / 10],
         slopes[slopes.len() - 1]
     );
-    println!("| margin L | decoded, share of the dense grid | sparse sampling per shape (ms) | shapes whose mesh differs |");
+    println!(
+        "| margin L | decoded, share of the dense grid | sparse sampling per shape (ms) | shapes whose mesh differs |"
+    );
     println!("|---|---|---|---|");
     for (k, margin) in margins.iter().enumerate() {
-        let mark = if *margin == LIPSCHITZ_MARGIN { " (the default)" } else { "" };
+        let mark = if *margin == LIPSCHITZ_MARGIN {
+            " (the default)"
+        } else {
+            ""
+        };
         println!(
             "| {margin}{mark} | {:.1} % | {:.0} | {} |",
             100.0 * decoded[k] as f64 / total,

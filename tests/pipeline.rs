@@ -805,11 +805,12 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             .output()
             .unwrap()
     };
-    let o = repro(&out, ["2", "3", "5"], &[]);
+    let o = repro(&out, ["2", "3", "5"], &[("RESTART_STEPS", "7")]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
-    // The three stages ran in order: stage 2 stopped at 3, stage 3 resumed there.
-    assert_eq!(err.matches("+ physnap train diffusion").count(), 3, "{err}");
+    // The four runs ran in order: stage 2 stopped at 3, stage 3 resumed there and ran to 5,
+    // and the second cosine cycle (the restart) resumed at 5, decaying from there to 7.
+    assert_eq!(err.matches("+ physnap train diffusion").count(), 4, "{err}");
     let read = |p: &Path| -> serde_json::Value {
         serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
     };
@@ -822,13 +823,13 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             &summary["lr_decay_start"]
         ),
         (
+            &serde_json::json!(7),
             &serde_json::json!(5),
-            &serde_json::json!(3),
-            &serde_json::json!(2)
+            &serde_json::json!(5)
         ),
         "{summary:#}"
     );
-    assert_eq!(read(&w.join("checkpoint.json"))["step"], 5);
+    assert_eq!(read(&w.join("checkpoint.json"))["step"], 7);
     let m = read(&w.join("manifest.json"));
     assert!(
         m["codebook"]["config"]["rows"].as_u64().unwrap() >= 1,
@@ -865,11 +866,10 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             "{stage}: {m:#}"
         );
     }
-    // The denoiser takes the shipped denoiser's exact step by default (one batch slice).
-    assert!(
-        err.contains("--batch-shards 1"),
-        "the recipe's denoiser runs name their step: {err}"
-    );
+    // The denoiser takes the shipped denoiser's step by default (one batch slice); the
+    // restart (RESTART_STEPS, here 7) takes two.
+    assert_eq!(err.matches("--batch-shards 1").count(), 3, "{err}");
+    assert_eq!(err.matches("--batch-shards 2").count(), 1, "{err}");
     let cycles = m["training"]["shape_cycles"].as_array().unwrap();
     assert_eq!(cycles.len(), 1, "{m:#}");
     assert_eq!(cycles[0]["config"]["seed"], 0, "{m:#}");
@@ -889,6 +889,8 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         (&[("DECODER_EIKONAL", "0.01 strong")][..], "strong"),
         (&[("DECODER_EIKONAL", "0.01")][..], "DECODER_EIKONAL"),
         (&[("DENOISER_SHARDS", "0")][..], "DENOISER_SHARDS"),
+        (&[("RESTART_SHARDS", "two")][..], "RESTART_SHARDS"),
+        (&[("RESTART_STEPS", "6000")][..], "RESTART_STEPS"),
     ] {
         let o = Command::new("bash")
             .arg(concat!(
@@ -907,7 +909,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         assert!(!bad.exists());
     }
 
-    // STAGE2=0: two denoiser runs, the second resuming at STAGE1 and running to STEPS; the
+    // STAGE2=0, RESTART_STEPS=0: two denoiser runs, the second resuming at STAGE1 and running to STEPS; the
     // first prior with burn's autodiff (SHAPE_BACKWARD=burn), the denoiser on two batch
     // slices, one plain decoder cycle.
     let two = root.path().join("two");
@@ -915,6 +917,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         &two,
         ["2", "0", "4"],
         &[
+            ("RESTART_STEPS", "0"),
             ("SHAPE_BACKWARD", "burn"),
             ("DENOISER_SHARDS", "2"),
             ("DECODER_CYCLES", "1"),

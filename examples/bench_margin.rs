@@ -12,26 +12,18 @@
 //! Figures: BENCHMARKS.md, docs/eval/recipe128/v5r2/lipschitz_margins.txt.
 
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 use physnap::io::manifest::load_models;
-use physnap::mesh::sampling::{LIPSCHITZ_MARGIN, sample_dense, sample_grid_with_margin};
+use physnap::mesh::sampling::{
+    CountingSdf, LIPSCHITZ_MARGIN, mesh_difference, sample_dense, sample_grid_with_margin,
+    steepest_grid_slope,
+};
 use physnap::mesh::{DEFAULT_RESOLUTION, DOMAIN_HALF};
 use physnap::model::shape_prior::LatentSdfDecoder;
-use physnap::shape::{LatentDecoder, Sdf};
+use physnap::shape::LatentDecoder;
 
 #[global_allocator]
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
-
-/// An [`Sdf`] that counts its evaluations.
-struct Counted<'a>(&'a dyn Sdf, AtomicUsize);
-
-impl Sdf for Counted<'_> {
-    fn eval_batch(&self, points: &[[f32; 3]], out: &mut [f32]) {
-        self.1.fetch_add(points.len(), Ordering::Relaxed);
-        self.0.eval_batch(points, out);
-    }
-}
 
 fn main() -> anyhow::Result<()> {
     let mut args = std::env::args().skip(1);
@@ -48,7 +40,6 @@ fn main() -> anyhow::Result<()> {
     let m = r + 1;
     let spacing = 2.0 * DOMAIN_HALF / r as f32;
     let coord = |i: usize| -DOMAIN_HALF + spacing * i as f32;
-    let at = |x: usize, y: usize, z: usize| x + m * (y + m * z);
     let margins = [2.0f32, 3.0, 4.0, 5.0, 6.0];
     let mut decoded = vec![0usize; margins.len()];
     let mut differing = vec![0usize; margins.len()];
@@ -57,40 +48,15 @@ fn main() -> anyhow::Result<()> {
     for i in (0..codebook.rows()).step_by((codebook.rows() / n.max(1)).max(1)) {
         let sdf = decoder.sdf(codebook.row(i));
         let dense = sample_dense(sdf.as_ref(), r, &coord);
-        let mut steepest = 0.0f32;
-        for z in 0..m {
-            for y in 0..m {
-                for x in 0..m {
-                    let d = dense[at(x, y, z)];
-                    for (nx, ny, nz) in [(x + 1, y, z), (x, y + 1, z), (x, y, z + 1)] {
-                        if nx < m && ny < m && nz < m {
-                            steepest = steepest.max((dense[at(nx, ny, nz)] - d).abs() / spacing);
-                        }
-                    }
-                }
-            }
-        }
+        let steepest = steepest_grid_slope(&dense, m, spacing);
         slopes.push(steepest);
         for (k, &margin) in margins.iter().enumerate() {
-            let counted = Counted(sdf.as_ref(), AtomicUsize::new(0));
+            let counted = CountingSdf::new(sdf.as_ref());
             let t = std::time::Instant::now();
             let sparse = sample_grid_with_margin(&counted, r, spacing, &coord, margin);
             seconds[k] += t.elapsed().as_secs_f64();
-            decoded[k] += counted.1.load(Ordering::Relaxed);
-            let mut same = true;
-            for z in 0..r {
-                for y in 0..r {
-                    for x in 0..r {
-                        let corners =
-                            (0..8).map(|c| at(x + (c & 1), y + (c >> 1 & 1), z + (c >> 2)));
-                        let neg = corners.clone().filter(|&c| dense[c] < 0.0).count();
-                        let sneg = corners.clone().filter(|&c| sparse[c] < 0.0).count();
-                        let crossed = neg != 0 && neg != 8;
-                        same &= neg == sneg
-                            && (!crossed || corners.clone().all(|c| sparse[c] == dense[c]));
-                    }
-                }
-            }
+            decoded[k] += counted.evaluations();
+            let same = mesh_difference(&sparse, &dense, r).is_none();
             differing[k] += usize::from(!same);
         }
     }

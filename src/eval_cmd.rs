@@ -625,6 +625,7 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
     };
     use physnap::eval::guided::{
         MESH_OVERLAP_DEPTH, MESH_OVERLAP_SAMPLES, mesh_overlap, positive_share as share,
+        sdf_metrics,
     };
     use physnap::graph::{GraphTensor, ProjectOptions, node_ch, project};
     use physnap::train::shape::encode_object_parts;
@@ -659,12 +660,13 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
     }
     let pb = super::progress_bar(ids.len(), "objects");
     // Per object: category, original clouds, reconstruction (clouds or why not), empty parts,
-    // O_mesh of the original and of the reconstruction.
+    // O_mesh of the original and of the reconstruction, E_pen and E_mob of the reconstruction.
     type Rec = (
         String,
         StateClouds,
         Result<StateClouds, String>,
         usize,
+        [f64; 2],
         [f64; 2],
     );
     let recs: Vec<Rec> = ids
@@ -696,6 +698,10 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
                     g.node_mut(slot)[node_ch::LATENT..].copy_from_slice(code);
                 }
             }
+            // The paper's physical metrics of the test object itself, as the decoder sees it: the
+            // level a denoiser that reproduced the data exactly would reach (guided and unguided
+            // samples' E_pen / E_mob are read against it).
+            let physical = sdf_metrics(&decoder, &g, &[]);
             // Projection turns every node into a part with its latent code as the shape.
             let obj = project(
                 &g,
@@ -736,7 +742,14 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
             let overlap = [(&orig, &orig_meshes), (&obj, &meshes)]
                 .map(|(o, m)| mesh_overlap(o, m, MESH_OVERLAP_SAMPLES, salt));
             pb.inc(1);
-            Ok((cat, orig_clouds, rec, empty, overlap))
+            Ok((
+                cat,
+                orig_clouds,
+                rec,
+                empty,
+                overlap,
+                [physical.e_pen, physical.e_mob],
+            ))
         })
         .collect::<anyhow::Result<_>>()?;
     pb.finish_and_clear();
@@ -757,6 +770,8 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
             .filter(|v| v.is_finite())
             .collect()
     });
+    let physical: [Vec<f64>; 2] = [0, 1].map(|k| recs.iter().map(|r| r.5[k]).collect());
+    let above = |v: &[f64]| v.iter().filter(|&&x| x > 1e-4).count() as f64 / v.len().max(1) as f64;
 
     let pairs = rec_clouds.len() * originals.len() + originals.len() * (originals.len() - 1) / 2;
     let progress = PairProgress::new(pairs);
@@ -841,6 +856,15 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
         mean(&overlap[1]).unwrap_or(f64::NAN),
         100.0 * share(&overlap[1]),
     );
+    for (name, v) in ["E_pen", "E_mob"].iter().zip(&physical) {
+        println!(
+            "  {name} of the test objects under the decoder (graph.npy with encoder codes, at rest / swept): mean {:.3e}, median {:.3e}, {:.0}% > 0, {:.0}% > 1e-4",
+            mean(v).unwrap_or(f64::NAN),
+            median(v).unwrap_or(f64::NAN),
+            100.0 * share(v),
+            100.0 * above(v),
+        );
+    }
     for (c, h, t) in &per_cat {
         println!("    {c:<18} {h}/{t}");
     }
@@ -869,6 +893,8 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
                 "original": { "mean": mean(&overlap[0]), "median": median(&overlap[0]), "share": share(&overlap[0]) },
                 "reconstruction": { "mean": mean(&overlap[1]), "median": median(&overlap[1]), "share": share(&overlap[1]) },
             },
+            "e_pen": { "mean": mean(&physical[0]), "median": median(&physical[0]), "share": share(&physical[0]), "share_above_1e-4": above(&physical[0]) },
+            "e_mob": { "mean": mean(&physical[1]), "median": median(&physical[1]), "share": share(&physical[1]), "share_above_1e-4": above(&physical[1]) },
             "categories": per_cat.iter().map(|(c, h, t)| json!({"category": c, "hits": h, "objects": t})).collect::<Vec<_>>(),
             "seconds": { "encode_mesh": mesh_s, "total": wall },
             "command": std::env::args().collect::<Vec<_>>().join(" "),

@@ -589,6 +589,14 @@ fn synth_import_train_generate() {
         .as_f64()
         .unwrap_or(-1.0);
     assert!((0.0..=1.0).contains(&overlap), "{rc:#}");
+    // The data's own E_pen / E_mob under the decoder (what samples are read against).
+    for k in ["e_pen", "e_mob"] {
+        let mean = rc[k]["mean"].as_f64().unwrap_or(-1.0);
+        assert!(mean.is_finite() && mean >= 0.0, "{k}: {rc:#}");
+        let above = rc[k]["share_above_1e-4"].as_f64().unwrap_or(-1.0);
+        assert!((0.0..=1.0).contains(&above), "{k}: {rc:#}");
+    }
+    assert!(out.contains("E_pen of the test objects"), "{out}");
     // The control: the originals' meshes on the projected graphs. The graph representation
     // loses nothing, so every reconstruction is at distance ≈ 0 from its original and the
     // category accuracy is the originals' own leave-one-out figure.

@@ -121,7 +121,10 @@ fn the_shipped_codebook_retrieves_non_empty_shapes() {
 /// slope between neighbouring grid points stays below the margin the skipping assumes.
 #[test]
 fn sparse_meshing_of_shipped_shapes_equals_the_dense_grid() {
-    use physnap::mesh::sampling::{LIPSCHITZ_MARGIN, sample_dense, sample_grid};
+    use physnap::mesh::sampling::{
+        CountingSdf, LIPSCHITZ_MARGIN, mesh_difference, sample_dense, sample_grid,
+        steepest_grid_slope,
+    };
     use physnap::mesh::{DEFAULT_RESOLUTION, DOMAIN_HALF};
     let dev = physnap::model::cpu();
     let models = load_models(weights(), &dev).unwrap();
@@ -136,36 +139,16 @@ fn sparse_meshing_of_shipped_shapes_equals_the_dense_grid() {
     for i in (0..codebook.rows()).step_by(codebook.rows() / 12) {
         let sdf = physnap::shape::LatentDecoder::sdf(&decoder, codebook.row(i));
         let dense = sample_dense(sdf.as_ref(), r, &coord);
-        let counted = Counted(sdf.as_ref(), Default::default());
+        let counted = CountingSdf::new(sdf.as_ref());
         let sparse = sample_grid(&counted, r, spacing, &coord);
-        evaluated += counted.1.load(std::sync::atomic::Ordering::Relaxed);
+        evaluated += counted.evaluations();
         total += m * m * m;
-        let at = |x: usize, y: usize, z: usize| x + m * (y + m * z);
-        for z in 0..m {
-            for y in 0..m {
-                for x in 0..m {
-                    let (s, d) = (sparse[at(x, y, z)], dense[at(x, y, z)]);
-                    assert_eq!(s < 0.0, d < 0.0, "row {i} point ({x}, {y}, {z})");
-                    for (nx, ny, nz) in [(x + 1, y, z), (x, y + 1, z), (x, y, z + 1)] {
-                        if nx < m && ny < m && nz < m {
-                            let slope = (dense[at(nx, ny, nz)] - d).abs() / spacing;
-                            steepest = steepest.max(slope);
-                        }
-                    }
-                    if x < r && y < r && z < r {
-                        let corners: Vec<usize> = (0..8)
-                            .map(|c| at(x + (c & 1), y + (c >> 1 & 1), z + (c >> 2)))
-                            .collect();
-                        let neg = corners.iter().filter(|&&c| dense[c] < 0.0).count();
-                        if neg != 0 && neg != 8 {
-                            for c in corners {
-                                assert_eq!(sparse[c], dense[c], "row {i} cell ({x}, {y}, {z})");
-                            }
-                        }
-                    }
-                }
-            }
-        }
+        assert_eq!(
+            mesh_difference(&sparse, &dense, r),
+            None,
+            "codebook row {i}"
+        );
+        steepest = steepest.max(steepest_grid_slope(&dense, m, spacing));
     }
     eprintln!(
         "steepest slope {steepest:.3}; decoded {evaluated} of {total} points ({:.1} %)",
@@ -178,15 +161,4 @@ fn sparse_meshing_of_shipped_shapes_equals_the_dense_grid() {
         "steepest slope {steepest} leaves the margin {LIPSCHITZ_MARGIN} less than 25 % headroom"
     );
     assert!(evaluated * 2 < total, "decoded {evaluated} of {total}");
-}
-
-/// An [`physnap::shape::Sdf`] that counts its evaluations.
-struct Counted<'a>(&'a dyn physnap::shape::Sdf, std::sync::atomic::AtomicUsize);
-
-impl physnap::shape::Sdf for Counted<'_> {
-    fn eval_batch(&self, points: &[[f32; 3]], out: &mut [f32]) {
-        self.1
-            .fetch_add(points.len(), std::sync::atomic::Ordering::Relaxed);
-        self.0.eval_batch(points, out);
-    }
 }

@@ -28,6 +28,8 @@
 //! rayon pool (NAP's MISE, method.md §5.8, refines by sign changes instead, which can miss
 //! walls thinner than a coarse cell; the distance bound cannot).
 
+use std::sync::atomic::{AtomicUsize, Ordering};
+
 use rayon::prelude::*;
 
 use crate::shape::Sdf;
@@ -185,6 +187,86 @@ pub fn sample_grid_with_margin(
     val
 }
 
+/// An [`Sdf`] that counts the points it evaluates, to measure what [`sample_grid`] saves
+/// against [`sample_dense`] (tests, `examples/bench_margin.rs`).
+pub struct CountingSdf<'a> {
+    inner: &'a dyn Sdf,
+    count: AtomicUsize,
+}
+
+impl<'a> CountingSdf<'a> {
+    /// Wrap `inner` with a count of zero.
+    pub fn new(inner: &'a dyn Sdf) -> Self {
+        Self {
+            inner,
+            count: AtomicUsize::new(0),
+        }
+    }
+
+    /// Points evaluated so far.
+    pub fn evaluations(&self) -> usize {
+        self.count.load(Ordering::Relaxed)
+    }
+}
+
+impl Sdf for CountingSdf<'_> {
+    fn eval_batch(&self, points: &[[f32; 3]], out: &mut [f32]) {
+        self.count.fetch_add(points.len(), Ordering::Relaxed);
+        self.inner.eval_batch(points, out);
+    }
+}
+
+/// The steepest |f(a) − f(b)| / `spacing` between neighbouring points a, b of an m³ grid of
+/// values (layout as [`sample_grid`]): a lower bound on the field's Lipschitz constant, which
+/// [`LIPSCHITZ_MARGIN`] must exceed for the sparse grid to be exact where it matters.
+pub fn steepest_grid_slope(values: &[f32], m: usize, spacing: f32) -> f32 {
+    let at = |x: usize, y: usize, z: usize| x + m * (y + m * z);
+    let mut steepest = 0.0f32;
+    for z in 0..m {
+        for y in 0..m {
+            for x in 0..m {
+                let d = values[at(x, y, z)];
+                for (nx, ny, nz) in [(x + 1, y, z), (x, y + 1, z), (x, y, z + 1)] {
+                    if nx < m && ny < m && nz < m {
+                        steepest = steepest.max((values[at(nx, ny, nz)] - d).abs() / spacing);
+                    }
+                }
+            }
+        }
+    }
+    steepest
+}
+
+/// Why marching cubes would mesh the (r + 1)³ grid `sparse` differently from `dense`: the
+/// first grid point whose inside/outside sign differs, or the first cell the surface crosses
+/// (in `dense`) whose corner values are not exactly the dense ones. None: the same mesh.
+pub fn mesh_difference(sparse: &[f32], dense: &[f32], r: usize) -> Option<String> {
+    let m = r + 1;
+    if let Some(n) = (0..m * m * m).find(|&n| (sparse[n] < 0.0) != (dense[n] < 0.0)) {
+        let (x, y, z) = (n % m, n / m % m, n / (m * m));
+        return Some(format!(
+            "point ({x}, {y}, {z}): sparse {} against dense {}",
+            sparse[n], dense[n]
+        ));
+    }
+    for z in 0..r {
+        for y in 0..r {
+            for x in 0..r {
+                let corners: [usize; 8] = std::array::from_fn(|c| {
+                    (x + (c & 1)) + m * ((y + (c >> 1 & 1)) + m * (z + (c >> 2)))
+                });
+                let neg = corners.iter().filter(|&&c| dense[c] < 0.0).count();
+                if neg != 0 && neg != 8 && corners.iter().any(|&c| sparse[c] != dense[c]) {
+                    return Some(format!(
+                        "cell ({x}, {y}, {z}) is crossed by the surface but its corners are not exact"
+                    ));
+                }
+            }
+        }
+    }
+    None
+}
+
 /// The dense reference: every grid point evaluated.
 pub fn sample_dense(sdf: &dyn Sdf, r: usize, coord: &(dyn Fn(usize) -> f32 + Sync)) -> Vec<f32> {
     let m = r + 1;
@@ -194,21 +276,7 @@ pub fn sample_dense(sdf: &dyn Sdf, r: usize, coord: &(dyn Fn(usize) -> f32 + Syn
 
 #[cfg(test)]
 mod tests {
-    use std::sync::atomic::{AtomicUsize, Ordering};
-
     use super::*;
-
-    /// Counts evaluations.
-    struct Counted<F>(F, AtomicUsize);
-
-    impl<F: Fn([f32; 3]) -> f32 + Sync> Sdf for Counted<F> {
-        fn eval_batch(&self, points: &[[f32; 3]], out: &mut [f32]) {
-            self.1.fetch_add(points.len(), Ordering::Relaxed);
-            for (p, o) in points.iter().zip(out.iter_mut()) {
-                *o = (self.0)(*p);
-            }
-        }
-    }
 
     fn grid(r: usize) -> (f32, impl Fn(usize) -> f32 + Sync) {
         let spacing = 1.1 / r as f32;
@@ -232,31 +300,14 @@ mod tests {
                 let (spacing, coord) = grid(r);
                 let m = r + 1;
                 let dense = sample_dense(&f, r, &coord);
-                let counted = Counted(f, AtomicUsize::new(0));
+                let counted = CountingSdf::new(&f);
                 let sparse = sample_grid(&counted, r, spacing, &coord);
-                for (n, (s, d)) in sparse.iter().zip(&dense).enumerate() {
-                    assert_eq!(s.signum(), d.signum(), "{name} r {r} point {n}");
-                }
-                // Every cell with a sign change has all its corners exact.
-                for k in 0..r {
-                    for j in 0..r {
-                        for i in 0..r {
-                            let c: Vec<usize> = (0..8)
-                                .map(|c| {
-                                    (i + (c & 1)) + m * ((j + (c >> 1 & 1)) + m * (k + (c >> 2)))
-                                })
-                                .collect();
-                            if c.iter().any(|&f| dense[f] < 0.0)
-                                && c.iter().any(|&f| dense[f] >= 0.0)
-                            {
-                                for f in c {
-                                    assert_eq!(sparse[f], dense[f], "{name} r {r} point {f}");
-                                }
-                            }
-                        }
-                    }
-                }
-                let evals = counted.1.load(Ordering::Relaxed);
+                assert_eq!(mesh_difference(&sparse, &dense, r), None, "{name} r {r}");
+                assert!(
+                    steepest_grid_slope(&dense, m, spacing) <= 1.0 + 1e-3,
+                    "{name} r {r}"
+                );
+                let evals = counted.evaluations();
                 if r == 64 {
                     assert!(
                         evals * 2 < m * m * m,
@@ -266,6 +317,30 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A flipped sign anywhere, or an inexact corner of a crossed cell, is reported; an
+    /// inexact value far from the surface (right sign) is not.
+    #[test]
+    fn mesh_difference_finds_what_changes_the_mesh() {
+        let sphere = |p: [f32; 3]| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() - 0.3;
+        let (_, coord) = grid(8);
+        let dense = sample_dense(&sphere, 8, &coord);
+        let mut far = dense.clone();
+        far[0] *= 2.0; // a corner of the domain, far outside
+        assert_eq!(mesh_difference(&far, &dense, 8), None);
+        let mut flipped = dense.clone();
+        flipped[0] = -1.0;
+        assert!(
+            mesh_difference(&flipped, &dense, 8)
+                .unwrap()
+                .contains("point (0, 0, 0)")
+        );
+        // Point (6, 4, 4), x = 0.275, just inside: a corner of cells the surface crosses.
+        let mut nudged = dense.clone();
+        nudged[6 + 9 * (4 + 9 * 4)] += 1e-3;
+        let why = mesh_difference(&nudged, &dense, 8).unwrap();
+        assert!(why.contains("not exact"), "{why}");
     }
 
     /// Non-finite values never let a block be skipped, and come back as they were.

@@ -613,7 +613,9 @@ const MAX_SHAPE_PARTS: usize = 5000;
 
 /// `physnap eval reconstruction`: test objects passed through the representation the denoiser
 /// learns (their `graph.npy`, each part's code from the shape prior's encoder, projection,
-/// meshing with the decoder), compared with the originals by instantiation distance.
+/// meshing with the decoder), compared with the originals by instantiation distance; plus the
+/// test objects' own E_pen and E_mob under the decoder (the data's level of the physical metrics
+/// that generated samples are read against).
 ///
 /// Why: it separates what the shape prior and the representation lose from what the denoiser
 /// loses. Its category accuracy is what a conditioned sample could reach if the denoiser

@@ -627,7 +627,7 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
     };
     use physnap::eval::guided::{
         MESH_OVERLAP_DEPTH, MESH_OVERLAP_SAMPLES, mesh_overlap, positive_share as share,
-        sdf_metrics,
+        sdf_metrics, share_above,
     };
     use physnap::graph::{GraphTensor, ProjectOptions, node_ch, project};
     use physnap::train::shape::encode_object_parts;
@@ -773,7 +773,7 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
             .collect()
     });
     let physical: [Vec<f64>; 2] = [0, 1].map(|k| recs.iter().map(|r| r.5[k]).collect());
-    let above = |v: &[f64]| v.iter().filter(|&&x| x > 1e-4).count() as f64 / v.len().max(1) as f64;
+    let above = |v: &[f64]| share_above(v, 1e-4);
 
     let pairs = rec_clouds.len() * originals.len() + originals.len() * (originals.len() - 1) / 2;
     let progress = PairProgress::new(pairs);

@@ -921,11 +921,16 @@ pub fn mean(values: &[f64]) -> f64 {
 
 /// Share of the finite values that are > 0 (NaN when there are none).
 pub fn positive_share(values: &[f64]) -> f64 {
+    share_above(values, 0.0)
+}
+
+/// The share of the finite values above `threshold` (NaN when there are none).
+pub fn share_above(values: &[f64], threshold: f64) -> f64 {
     let v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
     if v.is_empty() {
         f64::NAN
     } else {
-        v.iter().filter(|&&x| x > 0.0).count() as f64 / v.len() as f64
+        v.iter().filter(|&&x| x > threshold).count() as f64 / v.len() as f64
     }
 }
 

@@ -47,6 +47,11 @@ struct Block {
     e: [usize; 3],
 }
 
+/// Flat index of grid point `p` in an m³ grid (x fastest).
+fn flat(m: usize, p: [usize; 3]) -> usize {
+    p[0] + m * (p[1] + m * p[2])
+}
+
 impl Block {
     fn corners(&self) -> [[usize; 3]; 8] {
         std::array::from_fn(|c| std::array::from_fn(|a| self.o[a] + ((c >> a) & 1) * self.e[a]))
@@ -120,7 +125,7 @@ pub fn sample_grid_with_margin(
     margin: f32,
 ) -> Vec<f32> {
     let m = r + 1;
-    let at = |p: [usize; 3]| p[0] + m * (p[1] + m * p[2]);
+    let at = |p: [usize; 3]| flat(m, p);
     let mut val = vec![f32::NAN; m * m * m];
     let mut known = vec![false; m * m * m];
     // Top level: blocks of b0 cells, b0 the largest power of two ≤ r / 8 (at least 1).
@@ -220,15 +225,14 @@ impl Sdf for CountingSdf<'_> {
 /// values (layout as [`sample_grid`]): a lower bound on the field's Lipschitz constant, which
 /// [`LIPSCHITZ_MARGIN`] must exceed for the sparse grid to be exact where it matters.
 pub fn steepest_grid_slope(values: &[f32], m: usize, spacing: f32) -> f32 {
-    let at = |x: usize, y: usize, z: usize| x + m * (y + m * z);
     let mut steepest = 0.0f32;
     for z in 0..m {
         for y in 0..m {
             for x in 0..m {
-                let d = values[at(x, y, z)];
-                for (nx, ny, nz) in [(x + 1, y, z), (x, y + 1, z), (x, y, z + 1)] {
-                    if nx < m && ny < m && nz < m {
-                        steepest = steepest.max((values[at(nx, ny, nz)] - d).abs() / spacing);
+                let d = values[flat(m, [x, y, z])];
+                for n in [[x + 1, y, z], [x, y + 1, z], [x, y, z + 1]] {
+                    if n.iter().all(|&c| c < m) {
+                        steepest = steepest.max((values[flat(m, n)] - d).abs() / spacing);
                     }
                 }
             }
@@ -252,9 +256,11 @@ pub fn mesh_difference(sparse: &[f32], dense: &[f32], r: usize) -> Option<String
     for z in 0..r {
         for y in 0..r {
             for x in 0..r {
-                let corners: [usize; 8] = std::array::from_fn(|c| {
-                    (x + (c & 1)) + m * ((y + (c >> 1 & 1)) + m * (z + (c >> 2)))
-                });
+                let cell = Block {
+                    o: [x, y, z],
+                    e: [1, 1, 1],
+                };
+                let corners = cell.corners().map(|c| flat(m, c));
                 let neg = corners.iter().filter(|&&c| dense[c] < 0.0).count();
                 if neg != 0 && neg != 8 && corners.iter().any(|&c| sparse[c] != dense[c]) {
                     return Some(format!(

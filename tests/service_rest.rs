@@ -787,13 +787,13 @@ async fn guided_ddim_job_streams_losses_and_ranks_best_of_n() {
         .filter(|e| e.event == "progress")
         .map(|e| e.json())
         .collect();
-    // 20 reverse steps, then the default 10 refinement steps (at t = 0, each with losses).
-    assert_eq!(req["refine_steps"], 10, "{req}");
+    // 20 reverse steps, then the default 30 refinement steps (at t = 0, each with losses).
+    assert_eq!(req["refine_steps"], 30, "{req}");
     assert!(
-        progress.iter().all(|p| p["total_steps"] == 30),
+        progress.iter().all(|p| p["total_steps"] == 50),
         "{progress:?}"
     );
-    // (The exporting event that may follow carries step 30 but no losses; the stream delivers
+    // (The exporting event that may follow carries step 50 but no losses; the stream delivers
     // it or not depending on timing, so it is not a refinement step.)
     let refined: Vec<&Value> = progress
         .iter()
@@ -837,7 +837,7 @@ async fn guided_ddim_job_streams_losses_and_ranks_best_of_n() {
     assert_eq!(ranking["format"], "physnap.job_ranking/v1");
     assert_eq!(ranking["guided"], true);
     assert_eq!(ranking["guidance"]["n_g"], 10);
-    assert_eq!(ranking["guidance"]["refine_steps"], 10);
+    assert_eq!(ranking["guidance"]["refine_steps"], 30);
     assert_eq!(ranking["retrieval"], "off");
     assert_eq!(ranking["joint_motion"], "dominant");
     let rows = ranking["samples"].as_array().unwrap();

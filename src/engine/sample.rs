@@ -6,7 +6,7 @@
 //! service's progress stream and the guidance terms attach to.
 //!
 //! Refinement (physnap, not in the paper; `GuidanceOptions::refine_steps`, 0 in the paper's
-//! settings, 10 at the CLI / service): after the last reverse step,
+//! settings, 30 at the CLI / service): after the last reverse step,
 //! `x₀ ← x₀ − clamp(∇_{x₀} ℓ(x₀), ±0.1·max_step)` on the finished sample, with no denoiser and
 //! no noise. The 200-step default leaves part overlaps the 1000-step sampler removes over its
 //! 500 guided steps; these steps remove them (EVALUATION.md, "Refinement after sampling"). The

@@ -64,7 +64,7 @@ pub struct JobRequest {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub guidance_max_step: Option<f64>,
     /// Refinement steps after sampling (physnap, not in the paper): small clamped gradient
-    /// steps on the guidance loss of the finished sample (0-1000; default 10; 0 = off, the
+    /// steps on the guidance loss of the finished sample (0-1000; default 30; 0 = off, the
     /// paper).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub refine_steps: Option<u32>,

@@ -714,7 +714,7 @@ mod tests {
         assert_eq!((s.tau, s.sampler.as_str(), s.eta), (1000.0, "ddim", 0.0));
         assert_eq!(s.engine_sampler(), Sampler::Ddim { eta: 0.0 });
         assert_eq!(s.guidance_max_step, Some(DEFAULT_MAX_STEP));
-        assert_eq!(s.refine_steps, 10);
+        assert_eq!(s.refine_steps, 30);
         assert_eq!((s.w_pc, s.w_pen, s.w_mob), (15.0, 2.0, 2.0));
         assert!(s.guided());
         // Exactly the last 100 of the 200 strided times are guided, as with the CLI's

@@ -59,7 +59,7 @@ pub const DEFAULT_LOSS_SCALES: [f64; 3] = [1.0, 3.0, 3.0];
 /// "Thirty refinement steps"). 30 since 2026-11-28: against 10, on 30 fresh scans × 2 in both
 /// blocks, E_pc fell in 119 of 120 samples and D_pc in 92 of 120 (means 0.94×, 0.93×), E_mob
 /// means fell to 0.66× / 0.51×, and E_pen, O_mesh and ID_gt stayed level; a step costs
-/// ≈ 0.1–0.2 s.
+/// ≈ 0.06–0.2 s (BENCHMARKS.md, "Guided sampling").
 pub const DEFAULT_REFINE_STEPS: usize = 30;
 /// Most refinement steps accepted.
 pub const MAX_REFINE_STEPS: usize = 1000;

@@ -56,10 +56,10 @@ pub const DEFAULT_MAX_STEP: f64 = 0.02;
 /// ℓ_mob at 3× the paper's weight buy the overlap back (EVALUATION.md).
 pub const DEFAULT_LOSS_SCALES: [f64; 3] = [1.0, 3.0, 3.0];
 /// Refinement steps the CLI and the service run by default (EVALUATION.md, "Refinement" and
-/// "Thirty refinement steps"). 30 since 2026-11-28: against 10, on 30 fresh scans × 2 in both
-/// blocks, E_pc fell in 119 of 120 samples and D_pc in 92 of 120 (means 0.94×, 0.93×), E_mob
-/// means fell to 0.66× / 0.51×, and E_pen, O_mesh and ID_gt stayed level; a step costs
-/// ≈ 0.06–0.2 s (BENCHMARKS.md, "Guided sampling").
+/// "Thirty refinement steps"). 30 since 2026-11-28: against 10, on 30 fresh scans × 2 × 2 seed
+/// sets in both blocks, E_pc fell in 239 of 240 samples and D_pc in 182 of 240 (means 0.96×,
+/// 0.95×), E_pen and E_mob means fell to 0.62–0.73×, and O_mesh and ID_gt stayed level; a
+/// step costs ≈ 0.06–0.2 s (BENCHMARKS.md, "Guided sampling").
 pub const DEFAULT_REFINE_STEPS: usize = 30;
 /// Most refinement steps accepted.
 pub const MAX_REFINE_STEPS: usize = 1000;

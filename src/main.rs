@@ -550,6 +550,10 @@ struct SamplingArgs {
     /// loss of the finished sample (physnap, not in the paper; 0: off).
     #[arg(long, env = "PHYSNAP_GUIDANCE_REFINE_STEPS", default_value_t = physnap::engine::guidance::DEFAULT_REFINE_STEPS)]
     guidance_refine_steps: usize,
+    /// Physics-only refinement: this many more such steps after those, on ℓ_pen and ℓ_mob alone
+    /// (ℓ_pc off), which push out the small overlaps ℓ_pc holds in place (physnap; 0: off).
+    #[arg(long, env = "PHYSNAP_GUIDANCE_REFINE_PHYSICS_STEPS", default_value_t = physnap::engine::guidance::DEFAULT_REFINE_PHYSICS_STEPS)]
+    guidance_refine_physics_steps: usize,
     /// Reverse-step rule: ddim (default) or ddpm (NAP; strided ancestral with --steps < 1000).
     /// The paper's sampler is `--sampler ddpm --steps 0`.
     #[arg(long, env = "PHYSNAP_SAMPLER", default_value = "ddim", value_parser = ["ddpm", "ddim"])]

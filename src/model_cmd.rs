@@ -587,6 +587,7 @@ fn guidance_options(a: &GenerateArgs) -> anyhow::Result<Option<GuidanceOptions>>
         tau: a.sampling.tau,
         max_step: super::max_step(a.sampling.guidance_max_step),
         refine_steps: a.sampling.guidance_refine_steps,
+        refine_physics_steps: a.sampling.guidance_refine_physics_steps,
     };
     opts.validate(Schedule::default().len())?;
     Ok(Some(opts))
@@ -785,6 +786,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         },
         max_step: super::max_step(a.sampling.guidance_max_step),
         refine_steps: a.sampling.guidance_refine_steps,
+        refine_physics_steps: a.sampling.guidance_refine_physics_steps,
         sampler: sampler(&a.sampling.sampler, a.sampling.eta),
         steps: a.sampling.steps,
         meshing,
@@ -906,6 +908,7 @@ pub fn eval_guided(a: EvalGuidedArgs) -> anyhow::Result<()> {
         "command": std::env::args().collect::<Vec<_>>().join(" "),
         "seed": a.seed, "guidance_steps": a.sampling.guidance_steps, "tau": a.sampling.tau,
         "guidance_max_step": opts.max_step, "guidance_refine_steps": opts.refine_steps,
+        "guidance_refine_physics_steps": opts.refine_physics_steps,
         "loss_scales": opts.loss_scales,
         "sampler": a.sampling.sampler, "steps": a.sampling.steps, "eta": a.sampling.eta,
         // The flags as given (null: each row's default, recorded in the row).

@@ -10,7 +10,9 @@
 //! `x₀ ← x₀ − clamp(∇_{x₀} ℓ(x₀), ±0.1·max_step)` on the finished sample, with no denoiser and
 //! no noise. The 200-step default leaves part overlaps the 1000-step sampler removes over its
 //! 500 guided steps; these steps remove them (EVALUATION.md, "Refinement after sampling"). The
-//! full clamp makes them bounce on ℓ_pc's landscape, a tenth of it descends.
+//! full clamp makes them bounce on ℓ_pc's landscape, a tenth of it descends. Physics-only
+//! refinement (`refine_physics_steps`, 0 by default) then runs more such steps on
+//! `w_pen ℓ_pen + w_mob ℓ_mob` alone, which resolves the small overlaps that ℓ_pc holds in place.
 //!
 //! Determinism: all noise (x_T and every z) is drawn from `Rng::new(seed)` in a fixed order and
 //! uploaded as data, so a seed fixes the output for a given model and thread count.
@@ -419,10 +421,13 @@ pub fn sample_guided(
     }
     // Refinement (physnap, not in the paper): small clamped gradient steps on ℓ of the sample
     // itself, x₀ ← x₀ − clamp(∇_{x₀} ℓ(x₀)); no denoiser, no noise.
-    if let Some((g, ctx)) = guidance.filter(|(g, _)| g.refine_steps > 0) {
+    // Then the physics-only steps, the same with ℓ_pc off (`refine_physics_steps`).
+    if let Some((g, ctx)) = guidance.filter(|(g, _)| g.refine_steps + g.physics_steps_run() > 0) {
         let (sv, se) = scale_tensors.expect("scales with guidance");
-        for r in 0..g.refine_steps {
+        let physics = g.physics_only();
+        for r in 0..g.refine_steps + g.physics_steps_run() {
             let step = times.len() + r + 1;
+            let g = if r < g.refine_steps { g } else { &physics };
             let va = v.clone().autodiff().require_grad();
             let ea = e.clone().autodiff().require_grad();
             let x0v = va.clone() * sv.clone().autodiff();
@@ -468,7 +473,7 @@ pub fn step_events(schedule_len: usize, steps: usize, guidance: Option<&Guidance
     timesteps(schedule_len, steps).len()
         + guidance
             .filter(|g| g.is_active())
-            .map_or(0, |g| g.refine_steps)
+            .map_or(0, |g| g.refine_steps + g.physics_steps_run())
 }
 
 /// Per-entry gradients of ℓ with respect to the (autodiff) nodes and edges.
@@ -928,6 +933,88 @@ mod tests {
         assert!(last < first, "refinement must descend: {first} -> {last}");
         assert_ne!(plain, refined);
         assert_eq!(refined, run(10, &mut Vec::new()), "deterministic per seed");
+    }
+
+    #[test]
+    fn physics_refinement_follows_with_pc_off_and_descends_pen_plus_mob() {
+        let model = tiny();
+        let field = tiny_field();
+        let (scales, schedule, base) = guided_setup();
+        let ctx = GuidanceContext {
+            field: &field,
+            scales: &scales,
+        };
+        // (step, total, ℓ_pc, w_pen ℓ_pen + w_mob ℓ_mob) of every event.
+        let run = |g: GuidanceOptions, events: &mut Vec<(usize, usize, f64, f64)>| {
+            let req = SampleRequest {
+                seed: 5,
+                batch: 1,
+                category: Some(0),
+                guidance: Some(g.clone()),
+                ..Default::default()
+            };
+            let dev = crate::model::cpu();
+            sample_guided(&model, &schedule, &req, Some(ctx), &dev, &mut |s| {
+                let (pc, phys) = s.guidance.map_or((f64::NAN, f64::NAN), |l| {
+                    (l.pc, g.w_pen * l.pen + g.w_mob * l.mob)
+                });
+                events.push((s.step, s.total, pc, phys));
+                ControlFlow::Continue(())
+            })
+            .unwrap()
+        };
+        let g = GuidanceOptions {
+            refine_steps: 2,
+            refine_physics_steps: 8,
+            ..base.clone()
+        };
+        let mut ev = Vec::new();
+        let out = run(g.clone(), &mut ev);
+        // 40 reverse steps, 2 refinement steps with ℓ_pc, then 8 without it.
+        assert_eq!(step_events(40, 0, Some(&g)), 50);
+        assert_eq!(ev.len(), 50);
+        assert!(ev.iter().all(|e| e.1 == 50), "{ev:?}");
+        assert!(ev[40..42].iter().all(|e| e.2 > 0.0), "{ev:?}");
+        // Everything before them is the run without them.
+        let mut before = Vec::new();
+        run(
+            GuidanceOptions {
+                refine_physics_steps: 0,
+                ..g.clone()
+            },
+            &mut before,
+        );
+        let bits = |e: &[(usize, usize, f64, f64)]| {
+            e.iter()
+                .map(|e| (e.0, e.2.to_bits(), e.3.to_bits()))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(bits(&ev[..42]), bits(&before));
+        let tail = &ev[42..];
+        assert!(
+            tail.iter().all(|e| e.2 == 0.0 && e.3.is_finite()),
+            "{tail:?}"
+        );
+        let (first, last) = (tail[0].3, tail[7].3);
+        assert!(
+            first > 0.0,
+            "the sample must overlap for this test to mean anything: {ev:?}"
+        );
+        assert!(
+            last < first,
+            "physics steps must descend: {first} -> {last}"
+        );
+        // Without ℓ_pen and ℓ_mob there is nothing to descend: no physics steps run.
+        let pc_only = GuidanceOptions {
+            w_pen: 0.0,
+            w_mob: 0.0,
+            ..g.clone()
+        };
+        assert_eq!(step_events(40, 0, Some(&pc_only)), 42);
+        let mut pc_ev = Vec::new();
+        run(pc_only, &mut pc_ev);
+        assert_eq!(pc_ev.len(), 42);
+        assert_eq!(out, run(g, &mut Vec::new()), "deterministic per seed");
     }
 
     #[test]

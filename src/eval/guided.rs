@@ -373,6 +373,8 @@ pub struct TableOptions {
     pub max_step: Option<f64>,
     /// Refinement steps after sampling (see `GuidanceOptions::refine_steps`).
     pub refine_steps: usize,
+    /// Physics-only refinement steps after those (see `GuidanceOptions::refine_physics_steps`).
+    pub refine_physics_steps: usize,
     /// Reverse-step rule and count.
     pub sampler: Sampler,
     /// Reverse steps (0: all).
@@ -767,6 +769,7 @@ pub fn run_rows(
                     tau: s.tau,
                     max_step: opts.max_step,
                     refine_steps: opts.refine_steps,
+                    refine_physics_steps: opts.refine_physics_steps,
                 });
                 for k in 0..opts.samples_per_cloud {
                     let seed = opts
@@ -1184,6 +1187,7 @@ mod tests {
             loss_scales: [1.0; 3],
             max_step: Some(0.05),
             refine_steps: 0,
+            refine_physics_steps: 0,
             sampler: Sampler::Ddim { eta: 0.0 },
             steps: 4,
             meshing: MeshingOptions { resolution: 8 },

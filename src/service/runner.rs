@@ -208,6 +208,8 @@ pub fn guidance_of(spec: &JobSpec, schedule_steps: usize) -> Option<GuidanceOpti
         tau: spec.tau,
         max_step: spec.guidance_max_step,
         refine_steps: spec.refine_steps as usize,
+        // Not a job setting (yet): the service runs none.
+        refine_physics_steps: 0,
     })
 }
 

@@ -61,7 +61,10 @@ pub const DEFAULT_LOSS_SCALES: [f64; 3] = [1.0, 3.0, 3.0];
 /// 0.95×), E_pen and E_mob means fell to 0.62–0.73×, and O_mesh and ID_gt stayed level; a
 /// step costs ≈ 0.06–0.2 s (BENCHMARKS.md, "Guided sampling").
 pub const DEFAULT_REFINE_STEPS: usize = 30;
-/// Most refinement steps accepted.
+/// Physics-only refinement steps the CLI runs by default after the refinement steps
+/// ([`GuidanceOptions::refine_physics_steps`]; 0: none, which is also the service's).
+pub const DEFAULT_REFINE_PHYSICS_STEPS: usize = 0;
+/// Most refinement steps accepted (each of `refine_steps` and `refine_physics_steps`).
 pub const MAX_REFINE_STEPS: usize = 1000;
 /// Refinement clamps at this fraction of `max_step`. Steps of the full clamp bounce on ℓ_pc's
 /// landscape (no denoiser pulls the sample back); a tenth descends smoothly (EVALUATION.md).
@@ -117,6 +120,12 @@ pub struct GuidanceOptions {
     /// clamp(∇_{x₀} ℓ(x₀), ±max_step · [`REFINE_STEP_FRACTION`]) this many times, on the sample
     /// itself (no denoiser, no noise). 0: off (the paper).
     pub refine_steps: usize,
+    /// Physics-only refinement (physnap, not in the paper): after the `refine_steps`, this many
+    /// more of the same clamped steps on w_pen ℓ_pen + w_mob ℓ_mob alone (ℓ_pc off). Under ℓ_pc
+    /// a contact settles where ℓ_pc's pull into a neighbour balances ℓ_pen's quadratic push
+    /// out, a small overlap that stays; without ℓ_pc it is pushed out. No steps run (and none
+    /// are reported) when w_pen and w_mob are both 0. 0: off.
+    pub refine_physics_steps: usize,
 }
 
 impl Default for GuidanceOptions {
@@ -146,6 +155,7 @@ impl GuidanceOptions {
             tau: DEFAULT_TAU,
             max_step: Some(DEFAULT_MAX_STEP),
             refine_steps: 0,
+            refine_physics_steps: 0,
         }
     }
 
@@ -226,6 +236,13 @@ impl GuidanceOptions {
                 self.refine_steps.to_string(),
             );
         }
+        if self.refine_physics_steps > MAX_REFINE_STEPS {
+            return bad(
+                "refine_physics_steps",
+                format!("at most {MAX_REFINE_STEPS}"),
+                self.refine_physics_steps.to_string(),
+            );
+        }
         if self.w_pc > 0.0 && self.points.is_empty() {
             return bad(
                 "points",
@@ -258,6 +275,25 @@ impl GuidanceOptions {
     /// The clamp of a refinement step (None: raw gradient, as `max_step`).
     pub fn refine_max_step(&self) -> Option<f64> {
         self.max_step.map(|c| c * REFINE_STEP_FRACTION)
+    }
+
+    /// The physics-only refinement steps that run: `refine_physics_steps`, or 0 when neither
+    /// ℓ_pen nor ℓ_mob is on.
+    pub fn physics_steps_run(&self) -> usize {
+        if self.w_pen > 0.0 || self.w_mob > 0.0 {
+            self.refine_physics_steps
+        } else {
+            0
+        }
+    }
+
+    /// The same guidance with ℓ_pc off: what a physics-only refinement step descends.
+    pub fn physics_only(&self) -> GuidanceOptions {
+        GuidanceOptions {
+            w_pc: 0.0,
+            points: Vec::new(),
+            ..self.clone()
+        }
     }
 
     /// Whether any term has a positive weight.

@@ -449,7 +449,7 @@ fn options_follow_the_paper_and_bad_values_name_field_limit_value() {
     assert_eq!(all.refine_steps, 0, "the paper's settings do not refine");
     assert!((all.refine_max_step().unwrap() - 0.002).abs() < 1e-12);
     // Each bad field is refused with a message naming the field, the value and the limit.
-    let cases: [(GuidanceOptions, &[&str]); 6] = [
+    let cases: [(GuidanceOptions, &[&str]); 7] = [
         (
             GuidanceOptions {
                 w_pen: -1.0,
@@ -484,6 +484,13 @@ fn options_follow_the_paper_and_bad_values_name_field_limit_value() {
                 ..all.clone()
             },
             &["guidance.refine_steps", "1001", "at most 1000"],
+        ),
+        (
+            GuidanceOptions {
+                refine_physics_steps: 1001,
+                ..all.clone()
+            },
+            &["guidance.refine_physics_steps", "1001", "at most 1000"],
         ),
         (
             GuidanceOptions { tau: 0.0, ..all },

@@ -121,10 +121,12 @@ pub struct GuidanceOptions {
     /// itself (no denoiser, no noise). 0: off (the paper).
     pub refine_steps: usize,
     /// Physics-only refinement (physnap, not in the paper): after the `refine_steps`, this many
-    /// more of the same clamped steps on w_pen ℓ_pen + w_mob ℓ_mob alone (ℓ_pc off). Under ℓ_pc
-    /// a contact settles where ℓ_pc's pull into a neighbour balances ℓ_pen's quadratic push
-    /// out, a small overlap that stays; without ℓ_pc it is pushed out. No steps run (and none
-    /// are reported) when w_pen and w_mob are both 0. 0: off.
+    /// more of the same clamped steps on w_pen ℓ_pen + w_mob ℓ_mob alone (ℓ_pc off), moving
+    /// only the parts' boxes (half-extents and centres; existence, shape codes and joints stay).
+    /// Under ℓ_pc a contact settles where ℓ_pc's pull into a neighbour balances ℓ_pen's
+    /// quadratic push out, a small overlap that stays; without ℓ_pc it is pushed out, at a cost
+    /// in scan alignment. No steps run (and none are reported) when w_pen and w_mob are both 0.
+    /// 0: off.
     pub refine_physics_steps: usize,
 }
 

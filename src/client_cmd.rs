@@ -72,9 +72,13 @@ pub struct SubmitArgs {
     #[arg(long, env = "PHYSNAP_GUIDANCE_MAX_STEP")]
     guidance_max_step: Option<f64>,
     /// Refinement steps on the guidance loss of the finished sample (physnap, not in the
-    /// paper; server default 10, 0 = off).
+    /// paper; server default 30, 0 = off).
     #[arg(long, env = "PHYSNAP_GUIDANCE_REFINE_STEPS")]
     guidance_refine_steps: Option<u32>,
+    /// Physics-only refinement steps after the refinement steps: ℓ_pen and ℓ_mob alone, part
+    /// boxes only (0-1000; server default 0 = off; they run only when w_pen or w_mob > 0).
+    #[arg(long, env = "PHYSNAP_GUIDANCE_REFINE_PHYSICS_STEPS")]
+    guidance_refine_physics_steps: Option<u32>,
     /// Reverse-step rule: ddim (server default) or ddpm (the paper's, with --steps 1000).
     #[arg(long, env = "PHYSNAP_SAMPLER", value_parser = ["ddpm", "ddim"])]
     sampler: Option<String>,
@@ -175,6 +179,7 @@ pub fn submit(a: SubmitArgs) -> anyhow::Result<()> {
             tau: a.tau,
             guidance_max_step: a.guidance_max_step,
             refine_steps: a.guidance_refine_steps,
+            refine_physics_steps: a.guidance_refine_physics_steps,
             sampler: a.sampler.clone().unwrap_or_default(),
             eta: a.eta,
             steps: a.steps,

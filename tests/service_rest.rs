@@ -875,6 +875,56 @@ async fn guided_ddim_job_streams_losses_and_ranks_best_of_n() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn physics_refinement_steps_are_a_job_setting_counted_in_progress() {
+    let s = start(Opts::default()).await;
+    let c = client();
+    // (physics steps asked, w_pen = w_mob, total progress steps): 10 reverse steps and 2
+    // refinement steps, then the 3 physics-only steps, which run only with w_pen or w_mob > 0.
+    for (w_phys, want_total) in [(2.0, 15), (0.0, 12)] {
+        let r = submit(
+            &c,
+            &s.url("/v1/jobs"),
+            json!({"points": points_json(64), "seed": 5, "resolution": 8, "sampler": "ddim",
+                   "steps": 10, "n_g": 5, "w_pc": 15.0, "w_pen": w_phys, "w_mob": w_phys,
+                   "guidance_max_step": 0.05, "refine_steps": 2, "refine_physics_steps": 3}),
+        )
+        .await;
+        assert_eq!(r.status(), 202);
+        let loc = r.headers()["location"].to_str().unwrap().to_string();
+        let job: Value = r.json().await.unwrap();
+        let req = &job["request"];
+        assert_eq!(req["refine_physics_steps"], 3, "{req}");
+        let r = c.get(s.url(&format!("{loc}/events"))).send().await.unwrap();
+        let evs = SseReader::new(r).collect().await;
+        let done = evs.last().unwrap().json();
+        assert_eq!(done["state"], "SUCCEEDED", "{done:#}");
+        let progress: Vec<Value> = evs
+            .iter()
+            .filter(|e| e.event == "progress")
+            .map(|e| e.json())
+            .collect();
+        assert!(!progress.is_empty());
+        assert!(
+            progress.iter().all(|p| p["total_steps"] == want_total),
+            "w_pen = w_mob = {w_phys}: {progress:?}"
+        );
+        let ranking: Value = c
+            .get(s.url(&format!("{loc}/artifacts/ranking.json")))
+            .send()
+            .await
+            .unwrap()
+            .json()
+            .await
+            .unwrap();
+        assert_eq!(
+            ranking["guidance"]["refine_physics_steps"], 3,
+            "{ranking:#}"
+        );
+    }
+    s.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn guidance_and_sampler_fields_are_validated() {
     let s = start(Opts::default()).await;
     let c = client();
@@ -893,6 +943,11 @@ async fn guidance_and_sampler_fields_are_validated() {
             "-1",
         ),
         (json!({"refine_steps": 1001}), "refine_steps", "1001"),
+        (
+            json!({"refine_physics_steps": 1001}),
+            "refine_physics_steps",
+            "1001",
+        ),
         (json!({"retrieval": "nearest"}), "retrieval", "\"nearest\""),
         (
             json!({"joint_motion": "revolute"}),

@@ -68,6 +68,10 @@ pub struct JobRequest {
     /// paper).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub refine_steps: Option<u32>,
+    /// Physics-only refinement steps after the refinement steps: ℓ_pen and ℓ_mob alone, part
+    /// boxes only (0-1000; default 0 = off). They run only when `w_pen` or `w_mob` is > 0.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub refine_physics_steps: Option<u32>,
     /// Sampler: `ddim` (default) or `ddpm` (NAP's; strided ancestral with fewer steps). The
     /// paper's sampler is `ddpm` with 1000 steps.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -142,6 +146,8 @@ pub struct UploadParams {
     pub guidance_max_step: Option<f64>,
     /// Refinement steps after sampling.
     pub refine_steps: Option<u32>,
+    /// Physics-only refinement steps after the refinement steps.
+    pub refine_physics_steps: Option<u32>,
     /// Sampler (`ddpm` or `ddim`).
     pub sampler: Option<String>,
     /// DDIM η.
@@ -211,6 +217,7 @@ impl JobRequest {
             tau: self.tau,
             guidance_max_step: self.guidance_max_step,
             refine_steps: self.refine_steps,
+            refine_physics_steps: self.refine_physics_steps,
             sampler: self.sampler,
             eta: self.eta,
             steps: self.steps,
@@ -240,6 +247,7 @@ impl UploadParams {
             tau: self.tau,
             guidance_max_step: self.guidance_max_step,
             refine_steps: self.refine_steps,
+            refine_physics_steps: self.refine_physics_steps,
             sampler: self.sampler,
             eta: self.eta,
             steps: self.steps,
@@ -277,6 +285,9 @@ pub struct RequestView {
     pub guidance_max_step: Option<f64>,
     /// Refinement steps after sampling (0: off).
     pub refine_steps: u32,
+    /// Physics-only refinement steps after the refinement steps (0: off; they run only when
+    /// `w_pen` or `w_mob` is > 0).
+    pub refine_physics_steps: u32,
     /// Sampler.
     pub sampler: String,
     /// DDIM η (0 for `ddpm`).
@@ -508,6 +519,7 @@ pub fn request_view(s: &JobSpec) -> RequestView {
         tau: s.tau,
         guidance_max_step: s.guidance_max_step,
         refine_steps: s.refine_steps,
+        refine_physics_steps: s.refine_physics_steps,
         sampler: s.sampler.clone(),
         eta: s.eta,
         steps: s.steps,

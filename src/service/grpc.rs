@@ -140,6 +140,7 @@ pub fn input_of(spec: pb::JobSpec) -> JobInput {
         tau: spec.tau,
         guidance_max_step: spec.guidance_max_step,
         refine_steps: spec.refine_steps,
+        refine_physics_steps: spec.refine_physics_steps,
         sampler: Some(spec.sampler).filter(|s| !s.is_empty()),
         eta: spec.eta,
         steps: spec.steps,

@@ -208,8 +208,7 @@ pub fn guidance_of(spec: &JobSpec, schedule_steps: usize) -> Option<GuidanceOpti
         tau: spec.tau,
         max_step: spec.guidance_max_step,
         refine_steps: spec.refine_steps as usize,
-        // Not a job setting (yet): the service runs none.
-        refine_physics_steps: 0,
+        refine_physics_steps: spec.refine_physics_steps as usize,
     })
 }
 
@@ -242,6 +241,7 @@ fn ranking_json(spec: &JobSpec, guidance: &Option<GuidanceOptions>, rows: &[Rank
             "w_pc": g.w_pc, "w_pen": g.w_pen, "w_mob": g.w_mob,
             "n_g": spec.n_g, "guided_below_t": g.steps, "tau": g.tau,
             "max_step": g.max_step, "refine_steps": g.refine_steps,
+            "refine_physics_steps": g.refine_physics_steps,
         })),
         "sampler": spec.sampler, "eta": spec.eta, "steps": spec.steps,
         "retrieval": spec.retrieval,

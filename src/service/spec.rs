@@ -10,8 +10,8 @@
 use crate::data::categories::category_index;
 use crate::engine::generate::{JointMotion, Retrieval};
 use crate::engine::guidance::{
-    DEFAULT_GUIDED_STEPS, DEFAULT_MAX_STEP, DEFAULT_REFINE_STEPS, DEFAULT_TAU, GuidanceOptions,
-    MAX_REFINE_STEPS, weights_active,
+    DEFAULT_GUIDED_STEPS, DEFAULT_MAX_STEP, DEFAULT_REFINE_PHYSICS_STEPS, DEFAULT_REFINE_STEPS,
+    DEFAULT_TAU, GuidanceOptions, MAX_REFINE_STEPS, weights_active,
 };
 use crate::engine::sample::Sampler;
 use crate::engine::sample::{
@@ -56,6 +56,9 @@ pub struct JobInput {
     pub guidance_max_step: Option<f64>,
     /// Refinement steps after sampling (default [`DEFAULT_REFINE_STEPS`]; 0: off).
     pub refine_steps: Option<u32>,
+    /// Physics-only refinement steps after the refinement steps: ℓ_pen and ℓ_mob alone, part
+    /// boxes only (default [`DEFAULT_REFINE_PHYSICS_STEPS`]; 0: off).
+    pub refine_physics_steps: Option<u32>,
     /// Sampler name (`ddpm` or `ddim`).
     pub sampler: Option<String>,
     /// DDIM noise level η (only with `ddim`).
@@ -164,6 +167,9 @@ pub struct JobSpec {
     pub guidance_max_step: Option<f64>,
     /// Refinement steps after sampling (0: off, the paper).
     pub refine_steps: u32,
+    /// Physics-only refinement steps after the refinement steps (ℓ_pen and ℓ_mob alone, part
+    /// boxes only; 0: off). They run only when `w_pen` or `w_mob` is > 0.
+    pub refine_physics_steps: u32,
     /// Sampler name (`ddpm` or `ddim`).
     pub sampler: String,
     /// DDIM η (0 for `ddpm`).
@@ -477,6 +483,16 @@ pub fn validate(
             refine_steps,
         ));
     }
+    let refine_physics_steps = input
+        .refine_physics_steps
+        .unwrap_or(DEFAULT_REFINE_PHYSICS_STEPS as u32);
+    if refine_physics_steps as usize > MAX_REFINE_STEPS {
+        return Err(violation(
+            "refine_physics_steps",
+            format!("<= {MAX_REFINE_STEPS} (0: off)"),
+            refine_physics_steps,
+        ));
+    }
     let samples = input.samples.unwrap_or(1);
     if samples == 0 || samples > limits.max_samples {
         return Err(violation(
@@ -617,6 +633,7 @@ pub fn validate(
         tau,
         guidance_max_step,
         refine_steps,
+        refine_physics_steps,
         sampler,
         eta,
         steps,
@@ -715,6 +732,7 @@ mod tests {
         assert_eq!(s.engine_sampler(), Sampler::Ddim { eta: 0.0 });
         assert_eq!(s.guidance_max_step, Some(DEFAULT_MAX_STEP));
         assert_eq!(s.refine_steps, 30);
+        assert_eq!(s.refine_physics_steps, 0);
         assert_eq!((s.w_pc, s.w_pen, s.w_mob), (15.0, 2.0, 2.0));
         assert!(s.guided());
         // Exactly the last 100 of the 200 strided times are guided, as with the CLI's
@@ -991,6 +1009,11 @@ mod tests {
         assert_eq!(
             (v.field.as_str(), v.value.as_str(), v.limit.as_str()),
             ("refine_steps", "1001", "<= 1000 (0: off)")
+        );
+        let v = bad(&|i| i.refine_physics_steps = Some(1001));
+        assert_eq!(
+            (v.field.as_str(), v.value.as_str(), v.limit.as_str()),
+            ("refine_physics_steps", "1001", "<= 1000 (0: off)")
         );
         let v = bad(&|i| i.points = Some(PointsInput::F32Le(vec![0; 13])));
         assert!(v.limit.contains("multiple of 12"));

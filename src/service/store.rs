@@ -165,6 +165,9 @@ struct SpecDoc {
     /// Absent in specs stored before refinement existed: those were accepted without it.
     #[serde(default)]
     refine_steps: u32,
+    /// Absent in specs stored before physics-only refinement existed: those ran none.
+    #[serde(default)]
+    refine_physics_steps: u32,
     sampler: String,
     #[serde(default)]
     eta: f64,
@@ -210,6 +213,7 @@ fn spec_to_row(s: &JobSpec) -> (String, Vec<u8>) {
         tau: s.tau,
         guidance_max_step: s.guidance_max_step,
         refine_steps: s.refine_steps,
+        refine_physics_steps: s.refine_physics_steps,
         sampler: s.sampler.clone(),
         eta: s.eta,
         steps: s.steps,
@@ -256,6 +260,7 @@ fn spec_from_row(id: &str, json: &str, blob: &[u8]) -> Result<JobSpec, StoreErro
         tau: d.tau,
         guidance_max_step: d.guidance_max_step,
         refine_steps: d.refine_steps,
+        refine_physics_steps: d.refine_physics_steps,
         sampler: d.sampler,
         eta: d.eta,
         steps: d.steps,
@@ -558,9 +563,20 @@ mod tests {
         assert_eq!(spec.category_guidance, 0.0);
         assert_eq!(spec.category_guidance_below, 1000);
         assert_eq!(spec.joint_motion, "screw");
+        assert_eq!(spec.refine_physics_steps, 0);
         // And a spec round-trips through its row unchanged.
-        let (json, blob) = spec_to_row(&spec);
+        let (json, blob) = spec_to_row(&JobSpec {
+            refine_physics_steps: 7,
+            ..spec.clone()
+        });
         let back = spec_from_row("j", &json, &blob).unwrap();
+        assert_eq!(
+            back,
+            JobSpec {
+                refine_physics_steps: 7,
+                ..spec
+            }
+        );
         assert_eq!(back.category_guidance_below, 1000);
         assert_eq!(back.seed, 7);
         let corrupt = spec_from_row("j", &json, &[0u8; 5])

@@ -61,8 +61,9 @@ pub const DEFAULT_LOSS_SCALES: [f64; 3] = [1.0, 3.0, 3.0];
 /// 0.95×), E_pen and E_mob means fell to 0.62–0.73×, and O_mesh and ID_gt stayed level; a
 /// step costs ≈ 0.06–0.2 s (BENCHMARKS.md, "Guided sampling").
 pub const DEFAULT_REFINE_STEPS: usize = 30;
-/// Physics-only refinement steps the CLI runs by default after the refinement steps
-/// ([`GuidanceOptions::refine_physics_steps`]; 0: none, which is also the service's).
+/// Physics-only refinement steps the CLI and the service run by default after the refinement
+/// steps ([`GuidanceOptions::refine_physics_steps`]; 0: none). They trade scan alignment for
+/// fewer overlaps (EVALUATION.md, "Physics-only refinement"), so they are opt-in.
 pub const DEFAULT_REFINE_PHYSICS_STEPS: usize = 0;
 /// Most refinement steps accepted (each of `refine_steps` and `refine_physics_steps`).
 pub const MAX_REFINE_STEPS: usize = 1000;

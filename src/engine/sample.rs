@@ -13,7 +13,7 @@
 //! full clamp makes them bounce on ℓ_pc's landscape, a tenth of it descends. Physics-only
 //! refinement (`refine_physics_steps`, 0 by default) then runs more such steps on
 //! `w_pen ℓ_pen + w_mob ℓ_mob` alone, on the part boxes alone, which pushes out the small
-//! overlaps that ℓ_pc holds in place.
+//! overlaps that ℓ_pc holds in place; the lowest-loss state they evaluated is the result.
 //!
 //! Determinism: all noise (x_T and every z) is drawn from `Rng::new(seed)` in a fixed order and
 //! uploaded as data, so a seed fixes the output for a given model and thread count.
@@ -427,6 +427,10 @@ pub fn sample_guided(
         let (sv, se) = scale_tensors.expect("scales with guidance");
         let (g_all, physics) = (g, g.physics_only());
         let box_mask = physics_mask(&v.device());
+        // The physics phase keeps the lowest-loss state it evaluated (the first is the refined
+        // sample): its loss is noisy (ℓ_mob draws new joint states each step) and jumps where
+        // boxes start to intersect, so the last iterate can be far worse than an earlier one.
+        let mut best: Option<(f64, Tensor<3>, Tensor<3>)> = None;
         for r in 0..g.refine_steps + g.physics_steps_run() {
             let step = times.len() + r + 1;
             let g = if r < g.refine_steps { g } else { &physics };
@@ -443,6 +447,9 @@ pub fn sample_guided(
                 &mut mob_rng,
                 (step, 0),
             )?;
+            if r >= g_all.refine_steps && best.as_ref().is_none_or(|b| values.total < b.0) {
+                best = Some((values.total, v.clone(), e.clone()));
+            }
             if let Some(grad) = grad {
                 // A physics-only step moves the part boxes alone (see `physics_mask`).
                 let grad = if r < g_all.refine_steps {
@@ -470,6 +477,9 @@ pub fn sample_guided(
                     reason,
                 });
             }
+        }
+        if let Some((_, bv, be)) = best {
+            (v, e) = (bv, be);
         }
     }
     Ok(from_tensors(v, e))
@@ -1049,7 +1059,42 @@ mod tests {
         let mut pc_ev = Vec::new();
         run(pc_only, &mut pc_ev);
         assert_eq!(pc_ev.len(), 42);
-        assert_eq!(out, run(g, &mut Vec::new()), "deterministic per seed");
+        assert_eq!(
+            out,
+            run(g.clone(), &mut Vec::new()),
+            "deterministic per seed"
+        );
+        // It returns the lowest-loss state the physics steps evaluated: event i's loss is that
+        // of the state before its step, which event i − 1 previews.
+        let req = SampleRequest {
+            seed: 5,
+            batch: 1,
+            category: Some(0),
+            guidance: Some(g.clone()),
+            preview_every: 1,
+            ..Default::default()
+        };
+        let mut seen: Vec<(f64, Vec<GraphTensor>)> = Vec::new();
+        let dev = crate::model::cpu();
+        let previewed = sample_guided(&model, &schedule, &req, Some(ctx), &dev, &mut |s| {
+            let total = s.guidance.map_or(f64::NAN, |l| l.total);
+            seen.push((total, s.x0_preview.clone().expect("a preview every step")));
+            ControlFlow::Continue(())
+        })
+        .unwrap();
+        assert_eq!(previewed, out);
+        let mut best = 42;
+        for i in 43..50 {
+            if seen[i].0 < seen[best].0 {
+                best = i;
+            }
+        }
+        assert_eq!(
+            out,
+            seen[best - 1].1,
+            "best at event {best}: {:?}",
+            &seen[42..]
+        );
     }
 
     #[test]

@@ -126,8 +126,10 @@ pub struct GuidanceOptions {
     /// only the parts' boxes (half-extents and centres; existence, shape codes and joints stay).
     /// Under ℓ_pc a contact settles where ℓ_pc's pull into a neighbour balances ℓ_pen's
     /// quadratic push out, a small overlap that stays; without ℓ_pc it is pushed out, at a cost
-    /// in scan alignment. No steps run (and none are reported) when w_pen and w_mob are both 0.
-    /// 0: off.
+    /// in scan alignment. Of the states these steps evaluate (the first is the refined sample),
+    /// the one with the lowest loss is returned: ℓ_mob is noisy and ℓ_pen jumps where boxes
+    /// start to intersect. No steps run (and none are reported) when w_pen and w_mob are both
+    /// 0. 0: off.
     pub refine_physics_steps: usize,
 }
 

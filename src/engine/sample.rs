@@ -425,15 +425,16 @@ pub fn sample_guided(
     // Then the physics-only steps, the same with ℓ_pc off (`refine_physics_steps`).
     if let Some((g, ctx)) = guidance.filter(|(g, _)| g.refine_steps + g.physics_steps_run() > 0) {
         let (sv, se) = scale_tensors.expect("scales with guidance");
-        let (g_all, physics) = (g, g.physics_only());
+        let (refine, physics) = (g.refine_steps, g.physics_only());
         let box_mask = physics_mask(&v.device());
         // The physics phase keeps the lowest-loss state it evaluated (the first is the refined
         // sample): its loss is noisy (ℓ_mob draws new joint states each step) and jumps where
         // boxes start to intersect, so the last iterate can be far worse than an earlier one.
         let mut best: Option<(f64, Tensor<3>, Tensor<3>)> = None;
-        for r in 0..g.refine_steps + g.physics_steps_run() {
+        for r in 0..refine + g.physics_steps_run() {
             let step = times.len() + r + 1;
-            let g = if r < g.refine_steps { g } else { &physics };
+            let physics_step = r >= refine;
+            let g = if physics_step { &physics } else { g };
             let va = v.clone().autodiff().require_grad();
             let ea = e.clone().autodiff().require_grad();
             let x0v = va.clone() * sv.clone().autodiff();
@@ -447,15 +448,15 @@ pub fn sample_guided(
                 &mut mob_rng,
                 (step, 0),
             )?;
-            if r >= g_all.refine_steps && best.as_ref().is_none_or(|b| values.total < b.0) {
+            if physics_step && best.as_ref().is_none_or(|b| values.total < b.0) {
                 best = Some((values.total, v.clone(), e.clone()));
             }
             if let Some(grad) = grad {
                 // A physics-only step moves the part boxes alone (see `physics_mask`).
-                let grad = if r < g_all.refine_steps {
-                    grad
-                } else {
+                let grad = if physics_step {
                     (grad.0.map(|x| x * box_mask.clone()), None)
+                } else {
+                    grad
                 };
                 (v, e) = descend((v, e), grad, g.refine_max_step());
             }

@@ -453,6 +453,13 @@ struct DiffusionArgs {
     /// high noise up to the cap; 1 = off (NAP).
     #[arg(long, env = "PHYSNAP_DIFFUSION_HIGH_NOISE_CAP", default_value_t = 1.0)]
     high_noise_cap: f64,
+    /// Box-overlap penalty λ: for samples with t < --overlap-max-t, x̂₀'s part boxes pay
+    /// λ · (depth beyond the data pair's depth)² per intersecting pair; 0 = off (NAP).
+    #[arg(long, env = "PHYSNAP_DIFFUSION_OVERLAP_WEIGHT", default_value_t = 0.0)]
+    overlap_weight: f64,
+    /// The box-overlap penalty counts only samples with t below this (1..=500).
+    #[arg(long, env = "PHYSNAP_DIFFUSION_OVERLAP_MAX_T", default_value_t = physnap::train::diffusion::DEFAULT_OVERLAP_MAX_T)]
+    overlap_max_t: usize,
     /// Slices each step's batch is split into, their passes run in parallel (one per core is
     /// the point; results depend on this number, not on the thread count; 1 = the single-pass
     /// step of runs before 2026-11-28). Measured on the CPU only: with `--device gpu` the

@@ -269,6 +269,8 @@ pub fn diffusion(a: DiffusionArgs) -> anyhow::Result<()> {
         stop_at: a.stop_at,
         min_snr_gamma: a.min_snr_gamma,
         high_noise_cap: a.high_noise_cap,
+        overlap_weight: a.overlap_weight,
+        overlap_max_t: a.overlap_max_t,
         batch_shards: a.batch_shards,
         compute,
         ..DiffusionTrainConfig::default()

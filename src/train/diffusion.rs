@@ -34,6 +34,22 @@
 //! turns the high-noise steps' ε-loss into an x̂₀-loss (ε-MSE / SNR = x̂₀-MSE), up to the cap,
 //! where what there is to learn is the category's typical layout. Both weights multiply.
 //!
+//! Box-overlap penalty (`overlap_weight` = λ > 0; off by default, i.e. NAP's loss): generated
+//! part boxes intersect three to four times as often as the data's, and ten times deeper
+//! (EVALUATION.md, session 37), which guidance then fights. For the samples with t <
+//! `overlap_max_t` the step also decodes the boxes of x̂₀ = (x_t − √(1 − ᾱ_t) ε̂) / √ᾱ_t,
+//! un-scaled to object units, and penalises every pair of parts that exist in x₀ for
+//! intersecting more deeply than the same pair does in x₀:
+//!
+//! ```text
+//! d(i, j) = min over axes a of [min(hi_ia, hi_ja) − max(lo_ia, lo_ja)],  lo/hi = t ∓ |b|
+//! L_overlap = λ · (1/B) Σ_samples Σ_{i<j, both exist} max(0, d̂(i, j) − max(0, d(i, j)))²
+//! ```
+//!
+//! d > 0 is the depth by which two boxes intersect (the smallest per-axis overlap), d ≤ 0 a
+//! gap. The term is one-sided: contact, nesting and gaps that the data has cost nothing; only
+//! overlap beyond the data's does. L = L_ε + L_overlap.
+//!
 //! Category conditioning: each sample carries its object's category index, replaced
 //! by the "no category" row with probability `category_dropout`, so one model serves both the
 //! category-aware and the unconditional mode.
@@ -121,6 +137,10 @@ pub struct DiffusionTrainConfig {
     /// Capped truncated-SNR weighting of the high-noise steps: each sample's ε-loss is also
     /// weighted by `clamp(1 / SNR(t), 1, cap)`. 1 (or less) = off (NAP's unweighted loss).
     pub high_noise_cap: f64,
+    /// Weight λ of the box-overlap penalty on x̂₀ (module documentation); 0 = off (NAP's loss).
+    pub overlap_weight: f64,
+    /// The penalty counts only samples with t below this (x̂₀ is a blur at high noise).
+    pub overlap_max_t: usize,
     /// Shards each step's batch is split into: their forward and backward passes run in
     /// parallel on the rayon pool and their gradients are summed (see the module documentation).
     pub batch_shards: usize,
@@ -178,11 +198,20 @@ impl Default for DiffusionTrainConfig {
             stop_at: None,
             min_snr_gamma: 0.0,
             high_noise_cap: 1.0,
+            overlap_weight: 0.0,
+            overlap_max_t: DEFAULT_OVERLAP_MAX_T,
             batch_shards: 2,
             compute: Compute::Cpu,
         }
     }
 }
+
+/// Default `overlap_max_t`.
+pub const DEFAULT_OVERLAP_MAX_T: usize = 300;
+/// Largest `overlap_max_t`: beyond it x̂₀ = (x_t − √(1 − ᾱ_t) ε̂) / √ᾱ_t amplifies the
+/// prediction's error more than 4×, and the penalty swamps the ε-loss (a tiny run at 1000
+/// diverged).
+pub const MAX_OVERLAP_T: usize = 500;
 
 /// One progress report.
 #[derive(Debug, Clone)]
@@ -328,6 +357,88 @@ pub fn grouped_loss_per_sample(
     (node + edge).reshape([b])
 }
 
+/// Intersection depth of two parts' boxes, from their raw (unscaled) node rows: the smallest
+/// per-axis overlap of `[t − |b|, t + |b|]`; > 0 intersecting, ≤ 0 a gap (module
+/// documentation).
+pub fn box_depth(a: &[f32], b: &[f32]) -> f32 {
+    (0..3)
+        .map(|k| {
+            let (ca, ha) = (a[node_ch::CENTER + k], a[node_ch::BOX + k].abs());
+            let (cb, hb) = (b[node_ch::CENTER + k], b[node_ch::BOX + k].abs());
+            (ca + ha).min(cb + hb) - (ca - ha).max(cb - hb)
+        })
+        .fold(f32::INFINITY, f32::min)
+}
+
+/// The penalty's per-pair targets of one raw graph, each `K × K` row-major: max(0, d(i, j))
+/// and the mask of the pairs i < j whose parts both exist.
+fn pair_targets(raw: &GraphTensor) -> (Vec<f32>, Vec<f32>) {
+    let mut depth = vec![0.0f32; K * K];
+    let mut mask = vec![0.0f32; K * K];
+    let exists = |i: usize| raw.node(i)[node_ch::EXIST] > 0.5;
+    for i in 0..K {
+        for j in i + 1..K {
+            if exists(i) && exists(j) {
+                depth[i * K + j] = box_depth(raw.node(i), raw.node(j)).max(0.0);
+                mask[i * K + j] = 1.0;
+            }
+        }
+    }
+    (depth, mask)
+}
+
+/// The box-overlap penalty's targets for a batch of `B` samples.
+#[derive(Clone)]
+pub struct OverlapBatch {
+    /// √ᾱ_t, `[B, 1, 1]`.
+    pub sqrt_alpha_bar: Tensor<3>,
+    /// √(1 − ᾱ_t), `[B, 1, 1]`.
+    pub sqrt_one_minus: Tensor<3>,
+    /// max(0, d(i, j)) of x₀, `[B, K, K]`.
+    pub depth: Tensor<3>,
+    /// 1 for the pairs that count (i < j, both exist in x₀, t < `overlap_max_t`), `[B, K, K]`.
+    pub mask: Tensor<3>,
+    /// Box and centre channel scales (model → object units), `[1, 1, 6]`.
+    pub scales: Tensor<3>,
+    /// λ.
+    pub weight: f32,
+}
+
+impl OverlapBatch {
+    fn slice(&self, start: usize, len: usize) -> OverlapBatch {
+        OverlapBatch {
+            sqrt_alpha_bar: self.sqrt_alpha_bar.clone().narrow(0, start, len),
+            sqrt_one_minus: self.sqrt_one_minus.clone().narrow(0, start, len),
+            depth: self.depth.clone().narrow(0, start, len),
+            mask: self.mask.clone().narrow(0, start, len),
+            scales: self.scales.clone(),
+            weight: self.weight,
+        }
+    }
+}
+
+/// L_overlap (module documentation) of a batch: x̂₀'s boxes from the noised nodes `vt` and the
+/// predicted noise `pred_v` (both `[B, K, NODE_DIM]`, model space), summed over the counted
+/// pairs, averaged over the `B` samples and weighted by λ. `[1]`.
+pub fn box_overlap_penalty(vt: Tensor<3>, pred_v: Tensor<3>, o: &OverlapBatch) -> Tensor<1> {
+    let [b, k, _] = vt.dims();
+    let boxes = |x: Tensor<3>| x.narrow(2, node_ch::BOX, node_ch::LATENT - node_ch::BOX);
+    let x0 = (boxes(vt) - boxes(pred_v) * o.sqrt_one_minus.clone()) / o.sqrt_alpha_bar.clone()
+        * o.scales.clone();
+    let half = x0.clone().narrow(2, 0, 3).abs();
+    let centre = x0.narrow(2, 3, 3);
+    let (lo, hi) = (centre.clone() - half.clone(), centre + half);
+    // [B, K, K, 3]: row i's box against column j's.
+    let rows = |x: Tensor<3>| x.unsqueeze_dim::<4>(2).repeat_dim(2, k);
+    let cols = |x: Tensor<3>| x.unsqueeze_dim::<4>(1).repeat_dim(1, k);
+    let overlap = rows(hi.clone()).min_pair(cols(hi)) - rows(lo.clone()).max_pair(cols(lo));
+    let depth = overlap.min_dim(3).reshape([b, k, k]);
+    let excess = (depth - o.depth.clone()).clamp_min(0.0);
+    (excess.powi_scalar(2) * o.mask.clone())
+        .sum()
+        .mul_scalar(o.weight / b as f32)
+}
+
 /// One step's noised batch: inputs, targets and per-sample loss weights.
 struct ShardBatch {
     vt: Tensor<3>,
@@ -337,6 +448,7 @@ struct ShardBatch {
     eps_v: Tensor<3>,
     eps_e: Tensor<3>,
     weights: Option<Tensor<1>>,
+    overlap: Option<OverlapBatch>,
 }
 
 impl ShardBatch {
@@ -356,6 +468,7 @@ impl ShardBatch {
                 .weights
                 .as_ref()
                 .map(|w| w.clone().narrow(0, start, len)),
+            overlap: self.overlap.as_ref().map(|o| o.slice(start, len)),
         }
     }
 }
@@ -378,8 +491,15 @@ fn sharded_step(
     let bsz = batch.vt.dims()[0];
     let shards = shards.clamp(1, bsz);
     let run = |m: &Denoiser, b: ShardBatch, share: Option<f32>| {
-        let (pv, pe) = m.forward(b.vt, b.et, b.t, b.category);
+        let (pv, pe) = m.forward(b.vt.clone(), b.et, b.t, b.category);
+        let overlap = b
+            .overlap
+            .as_ref()
+            .map(|o| box_overlap_penalty(b.vt, pv.clone(), o));
         let mut loss = grouped_loss(pv, pe, b.eps_v, b.eps_e, b.weights);
+        if let Some(overlap) = overlap {
+            loss = loss + overlap;
+        }
         if let Some(share) = share {
             loss = loss * share;
         }
@@ -510,6 +630,18 @@ pub fn train_diffusion(
             cfg.high_noise_cap.to_string(),
         ),
         (
+            "overlap_weight",
+            cfg.overlap_weight >= 0.0 && cfg.overlap_weight <= 1e6,
+            "within [0, 1e6] (0 = off)",
+            cfg.overlap_weight.to_string(),
+        ),
+        (
+            "overlap_max_t",
+            (1..=MAX_OVERLAP_T).contains(&cfg.overlap_max_t),
+            "within 1..=500 (x̂₀ divides by √ᾱ_t, which falls below 0.24 past t = 500)",
+            cfg.overlap_max_t.to_string(),
+        ),
+        (
             "batch_shards",
             (1..=cfg.batch_objects * cfg.noise_levels).contains(&cfg.batch_shards),
             "within 1..=batch_objects × noise_levels",
@@ -575,19 +707,26 @@ pub fn train_diffusion(
         let mut x0 = Vec::with_capacity(bsz);
         let mut ts = Vec::with_capacity(bsz);
         let mut cats = Vec::with_capacity(bsz);
+        let overlap_on = cfg.overlap_weight > 0.0;
+        let (mut depth, mut mask) = (Vec::new(), Vec::new());
         for _ in 0..cfg.batch_objects {
             let k = rng.int(0, data.graphs.len() - 1);
             let mut perm: [usize; K] = std::array::from_fn(|i| i);
             for i in (1..K).rev() {
                 perm.swap(i, rng.int(0, i));
             }
-            let g = data.graphs[k]
-                .permuted(&perm)
-                .map_err(TrainError::Core)?
-                .scaled(&data.scales);
+            let raw = data.graphs[k].permuted(&perm).map_err(TrainError::Core)?;
+            let pairs = overlap_on.then(|| pair_targets(&raw));
+            let g = raw.scaled(&data.scales);
             for _ in 0..cfg.noise_levels {
                 x0.push(g.clone());
-                ts.push(rng.int(0, schedule.len() - 1));
+                let t = rng.int(0, schedule.len() - 1);
+                ts.push(t);
+                if let Some((d, m)) = &pairs {
+                    depth.extend_from_slice(d);
+                    let on = if t < cfg.overlap_max_t { 1.0 } else { 0.0 };
+                    mask.extend(m.iter().map(|v| v * on));
+                }
                 cats.push(if no_category == 0 || rng.chance(cfg.category_dropout) {
                     no_category
                 } else {
@@ -614,6 +753,24 @@ pub fn train_diffusion(
         });
         let sa = Tensor::<3>::from_data(TensorData::new(sa, [bsz, 1, 1]), &device);
         let sb = Tensor::<3>::from_data(TensorData::new(sb, [bsz, 1, 1]), &device);
+        let overlap = overlap_on.then(|| {
+            let pairs =
+                |v: Vec<f32>| Tensor::<3>::from_data(TensorData::new(v, [bsz, K, K]), &device);
+            OverlapBatch {
+                sqrt_alpha_bar: sa.clone(),
+                sqrt_one_minus: sb.clone(),
+                depth: pairs(std::mem::take(&mut depth)),
+                mask: pairs(std::mem::take(&mut mask)),
+                scales: Tensor::<3>::from_data(
+                    TensorData::new(
+                        data.scales.node[node_ch::BOX..node_ch::LATENT].to_vec(),
+                        [1, 1, node_ch::LATENT - node_ch::BOX],
+                    ),
+                    &device,
+                ),
+                weight: cfg.overlap_weight as f32,
+            }
+        });
         let vt = v0 * sa.clone() + eps_v.clone() * sb.clone();
         let et = e0 * sa + eps_e.clone() * sb;
         let t = Tensor::<1, Int>::from_data(
@@ -634,6 +791,7 @@ pub fn train_diffusion(
             eps_v,
             eps_e,
             weights,
+            overlap,
         };
         let (value, grads) = sharded_step(&model, batch, cfg.batch_shards, &device);
         if !value.is_finite() {
@@ -691,6 +849,7 @@ pub fn train_diffusion(
         "ema_decay": cfg.ema_decay, "ema_steps": shadow.as_ref().map_or(0, |e| e.steps),
         "seed": cfg.seed, "category_dropout": cfg.category_dropout,
         "min_snr_gamma": cfg.min_snr_gamma, "high_noise_cap": cfg.high_noise_cap,
+        "overlap_weight": cfg.overlap_weight, "overlap_max_t": cfg.overlap_max_t,
         "batch_shards": cfg.batch_shards,
         "feature_scales": { "node": data.scales.node, "edge": data.scales.edge },
         "categories": CATEGORIES.to_vec(), "train_objects": data.graphs.len(), "sha256": sha,
@@ -773,6 +932,8 @@ mod tests {
             stop_at: None,
             min_snr_gamma: 0.0,
             high_noise_cap: 1.0,
+            overlap_weight: 0.0,
+            overlap_max_t: DEFAULT_OVERLAP_MAX_T,
             batch_shards: 2,
             compute: crate::model::Compute::Cpu,
         }
@@ -886,6 +1047,129 @@ mod tests {
             e.contains("batch_shards") && e.contains("9") && e.contains("batch_objects"),
             "{e}"
         );
+        let e = err(DiffusionTrainConfig {
+            overlap_weight: -0.5,
+            ..tiny_config(10)
+        });
+        assert!(e.contains("overlap_weight") && e.contains("-0.5"), "{e}");
+        let e = err(DiffusionTrainConfig {
+            overlap_max_t: 501,
+            ..tiny_config(10)
+        });
+        assert!(
+            e.contains("overlap_max_t") && e.contains("501") && e.contains("1..=500"),
+            "{e}"
+        );
+    }
+
+    /// A raw node row with the given centre and half-extents.
+    fn box_row(centre: [f32; 3], half: [f32; 3]) -> Vec<f32> {
+        let mut row = vec![0.0; NODE_DIM];
+        row[node_ch::EXIST] = 1.0;
+        row[node_ch::BOX..node_ch::CENTER].copy_from_slice(&half);
+        row[node_ch::CENTER..node_ch::LATENT].copy_from_slice(&centre);
+        row
+    }
+
+    #[test]
+    fn box_depth_is_the_smallest_axis_overlap_and_negative_for_a_gap() {
+        let a = box_row([0.0; 3], [0.5; 3]);
+        // Overlaps 0.2 along x, fully along y and z: depth 0.2.
+        let b = box_row([0.8, 0.0, 0.0], [0.5, 0.2, 0.2]);
+        assert!((box_depth(&a, &b) - 0.2).abs() < 1e-6);
+        assert!((box_depth(&b, &a) - 0.2).abs() < 1e-6);
+        // A gap of 0.1 along y.
+        let c = box_row([0.0, 1.1, 0.0], [0.5; 3]);
+        assert!((box_depth(&a, &c) + 0.1).abs() < 1e-6);
+        // Negative half-extents count by their magnitude.
+        let d = box_row([0.8, 0.0, 0.0], [-0.5, 0.2, -0.2]);
+        assert_eq!(box_depth(&a, &d), box_depth(&a, &b));
+    }
+
+    #[test]
+    fn overlap_penalty_charges_only_depth_beyond_the_data_and_pushes_boxes_apart() {
+        // Two parts that touch in x₀ (depth 0); x̂₀ shifts the second 0.3 into the first.
+        let device = crate::model::Compute::Cpu.autodiff();
+        let x0 = [
+            box_row([0.0; 3], [0.5; 3]),
+            box_row([1.0, 0.0, 0.0], [0.5; 3]),
+        ];
+        let mut g = GraphTensor::empty();
+        for (i, row) in x0.iter().enumerate() {
+            g.node_mut(i).copy_from_slice(row);
+        }
+        let (depth, mask) = pair_targets(&g);
+        assert_eq!(mask.iter().sum::<f32>(), 1.0, "one pair counts: (0, 1)");
+        assert_eq!(depth[1], 0.0);
+        let scales = FeatureScales::default();
+        let (sa, sb) = (0.9f32, (1.0f32 - 0.81).sqrt());
+        let penalty = |shift: f32, mask: &[f32]| {
+            // x_t = sa x₀ + sb ε with ε = 0; the prediction ε̂ moves x̂₀'s second centre by −shift.
+            let mut nodes = vec![0.0f32; K * NODE_DIM];
+            let mut pred = vec![0.0f32; K * NODE_DIM];
+            for (i, row) in x0.iter().enumerate() {
+                for (c, v) in row.iter().enumerate() {
+                    nodes[i * NODE_DIM + c] = sa * v;
+                }
+            }
+            pred[NODE_DIM + node_ch::CENTER] = shift * sa / sb;
+            let t3 =
+                |v: Vec<f32>, d: [usize; 3]| Tensor::<3>::from_data(TensorData::new(v, d), &device);
+            let pred = t3(pred, [1, K, NODE_DIM]).require_grad();
+            let o = OverlapBatch {
+                sqrt_alpha_bar: t3(vec![sa], [1, 1, 1]),
+                sqrt_one_minus: t3(vec![sb], [1, 1, 1]),
+                depth: t3(depth.clone(), [1, K, K]),
+                mask: t3(mask.to_vec(), [1, K, K]),
+                scales: t3(
+                    scales.node[node_ch::BOX..node_ch::LATENT].to_vec(),
+                    [1, 1, 6],
+                ),
+                weight: 2.0,
+            };
+            let loss = box_overlap_penalty(t3(nodes, [1, K, NODE_DIM]), pred.clone(), &o);
+            let value = loss.clone().into_scalar::<f32>();
+            let grads = loss.backward();
+            let grad = pred
+                .grad(&grads)
+                .unwrap()
+                .into_data()
+                .try_to_vec::<f32>()
+                .unwrap();
+            (value, grad[NODE_DIM + node_ch::CENTER])
+        };
+        // x̂₀ = x₀: nothing to pay; pulled apart (a gap): nothing either.
+        assert!(penalty(0.0, &mask).0.abs() < 1e-6);
+        assert!(penalty(-0.2, &mask).0.abs() < 1e-6);
+        // 0.3 deeper than the data: λ · 0.3² = 0.18.
+        let (value, grad) = penalty(0.3, &mask);
+        assert!((value - 0.18).abs() < 1e-4, "{value}");
+        // Descending the loss lowers ε̂'s shift, i.e. moves the part back out.
+        assert!(grad > 0.0, "{grad}");
+        // A masked pair (a nonexistent part, or t ≥ overlap_max_t) costs nothing.
+        assert_eq!(penalty(0.3, &[0.0; K * K]).0, 0.0);
+    }
+
+    #[test]
+    fn overlap_training_lowers_the_loss_and_records_its_settings() {
+        let data = tiny_data();
+        let dir = tempfile::tempdir().unwrap();
+        let cfg = DiffusionTrainConfig {
+            overlap_weight: 10.0,
+            overlap_max_t: MAX_OVERLAP_T,
+            ..tiny_config(60)
+        };
+        let mut losses = Vec::new();
+        train_diffusion(&data, &cfg, dir.path(), false, &mut |p| losses.push(p.loss)).unwrap();
+        let first: f64 = losses[..10].iter().sum::<f64>() / 10.0;
+        let last: f64 = losses[50..].iter().sum::<f64>() / 10.0;
+        assert!(last < 0.8 * first, "loss did not fall: {first} -> {last}");
+        let summary: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(dir.path().join("diffusion_train.json")).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(summary["overlap_weight"], 10.0);
+        assert_eq!(summary["overlap_max_t"], MAX_OVERLAP_T);
     }
 
     #[test]

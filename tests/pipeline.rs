@@ -813,12 +813,17 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             .output()
             .unwrap()
     };
-    let o = repro(&out, ["2", "3", "5"], &[("RESTART_STEPS", "7")]);
+    let o = repro(
+        &out,
+        ["2", "3", "5"],
+        &[("RESTART_STEPS", "7 8"), ("RESTART_OVERLAP", "0 3")],
+    );
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
-    // The four runs ran in order: stage 2 stopped at 3, stage 3 resumed there and ran to 5,
-    // and the second cosine cycle (the restart) resumed at 5, decaying from there to 7.
-    assert_eq!(err.matches("+ physnap train diffusion").count(), 4, "{err}");
+    // The five runs ran in order: stage 2 stopped at 3, stage 3 resumed there and ran to 5,
+    // the first restart cycle resumed at 5, decaying from there to 7, and the second, with
+    // the box-overlap penalty, from 7 to 8.
+    assert_eq!(err.matches("+ physnap train diffusion").count(), 5, "{err}");
     let read = |p: &Path| -> serde_json::Value {
         serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
     };
@@ -831,13 +836,15 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             &summary["lr_decay_start"]
         ),
         (
+            &serde_json::json!(8),
             &serde_json::json!(7),
-            &serde_json::json!(5),
-            &serde_json::json!(5)
+            &serde_json::json!(7)
         ),
         "{summary:#}"
     );
-    assert_eq!(read(&w.join("checkpoint.json"))["step"], 7);
+    assert_eq!(summary["overlap_weight"], 3.0, "{summary:#}");
+    assert!(err.contains("--overlap-weight 0 "), "{err}");
+    assert_eq!(read(&w.join("checkpoint.json"))["step"], 8);
     let m = read(&w.join("manifest.json"));
     assert!(
         m["codebook"]["config"]["rows"].as_u64().unwrap() >= 1,
@@ -875,9 +882,9 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         );
     }
     // The denoiser takes the shipped denoiser's step by default (one batch slice); the
-    // restart (RESTART_STEPS, here 7) takes two.
+    // restart cycles (RESTART_STEPS, here 7 and 8) take two.
     assert_eq!(err.matches("--batch-shards 1").count(), 3, "{err}");
-    assert_eq!(err.matches("--batch-shards 2").count(), 1, "{err}");
+    assert_eq!(err.matches("--batch-shards 2").count(), 2, "{err}");
     let cycles = m["training"]["shape_cycles"].as_array().unwrap();
     assert_eq!(cycles.len(), 1, "{m:#}");
     assert_eq!(cycles[0]["config"]["seed"], 0, "{m:#}");
@@ -899,6 +906,15 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         (&[("DENOISER_SHARDS", "0")][..], "DENOISER_SHARDS"),
         (&[("RESTART_SHARDS", "two")][..], "RESTART_SHARDS"),
         (&[("RESTART_STEPS", "6000")][..], "RESTART_STEPS"),
+        (&[("RESTART_STEPS", "8000 7500")][..], "7500"),
+        (
+            &[("RESTART_STEPS", "8000 9000"), ("RESTART_OVERLAP", "3")][..],
+            "RESTART_OVERLAP",
+        ),
+        (
+            &[("RESTART_STEPS", "8000"), ("RESTART_OVERLAP", "lots")][..],
+            "lots",
+        ),
     ] {
         let o = Command::new("bash")
             .arg(concat!(

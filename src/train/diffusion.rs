@@ -209,8 +209,8 @@ impl Default for DiffusionTrainConfig {
 /// Default `overlap_max_t`.
 pub const DEFAULT_OVERLAP_MAX_T: usize = 300;
 /// Largest `overlap_max_t`: beyond it x̂₀ = (x_t − √(1 − ᾱ_t) ε̂) / √ᾱ_t amplifies the
-/// prediction's error more than 4×, and the penalty swamps the ε-loss (a tiny run at 1000
-/// diverged).
+/// prediction's error more than 4×, and the penalty swamps the ε-loss (a tiny run counting
+/// every t did not learn: its loss rose from ≈ 620 to ≈ 950 over 60 steps).
 pub const MAX_OVERLAP_T: usize = 500;
 
 /// One progress report.
@@ -1019,47 +1019,63 @@ mod tests {
                 .unwrap()
                 .to_string()
         };
-        let e = err(DiffusionTrainConfig {
-            category_dropout: 1.5,
-            ..tiny_config(10)
-        });
-        assert!(e.contains("category_dropout") && e.contains("1.5"), "{e}");
-        let e = err(DiffusionTrainConfig {
-            stop_at: Some(11),
-            ..tiny_config(10)
-        });
-        assert!(e.contains("stop_at") && e.contains("11"), "{e}");
-        let e = err(DiffusionTrainConfig {
-            min_snr_gamma: -1.0,
-            ..tiny_config(10)
-        });
-        assert!(e.contains("min_snr_gamma") && e.contains("-1"), "{e}");
-        let e = err(DiffusionTrainConfig {
-            high_noise_cap: f64::INFINITY,
-            ..tiny_config(10)
-        });
-        assert!(e.contains("high_noise_cap") && e.contains("inf"), "{e}");
-        let e = err(DiffusionTrainConfig {
-            batch_shards: 9,
-            ..tiny_config(10)
-        });
-        assert!(
-            e.contains("batch_shards") && e.contains("9") && e.contains("batch_objects"),
-            "{e}"
-        );
-        let e = err(DiffusionTrainConfig {
-            overlap_weight: -0.5,
-            ..tiny_config(10)
-        });
-        assert!(e.contains("overlap_weight") && e.contains("-0.5"), "{e}");
-        let e = err(DiffusionTrainConfig {
-            overlap_max_t: 501,
-            ..tiny_config(10)
-        });
-        assert!(
-            e.contains("overlap_max_t") && e.contains("501") && e.contains("1..=500"),
-            "{e}"
-        );
+        // Each bad value, and what its error must name: the field, the value, the limit.
+        let base = || tiny_config(10);
+        let cases: [(DiffusionTrainConfig, &[&str]); 7] = [
+            (
+                DiffusionTrainConfig {
+                    category_dropout: 1.5,
+                    ..base()
+                },
+                &["category_dropout", "1.5"],
+            ),
+            (
+                DiffusionTrainConfig {
+                    stop_at: Some(11),
+                    ..base()
+                },
+                &["stop_at", "11"],
+            ),
+            (
+                DiffusionTrainConfig {
+                    min_snr_gamma: -1.0,
+                    ..base()
+                },
+                &["min_snr_gamma", "-1"],
+            ),
+            (
+                DiffusionTrainConfig {
+                    high_noise_cap: f64::INFINITY,
+                    ..base()
+                },
+                &["high_noise_cap", "inf"],
+            ),
+            (
+                DiffusionTrainConfig {
+                    batch_shards: 9,
+                    ..base()
+                },
+                &["batch_shards", "9", "batch_objects"],
+            ),
+            (
+                DiffusionTrainConfig {
+                    overlap_weight: -0.5,
+                    ..base()
+                },
+                &["overlap_weight", "-0.5"],
+            ),
+            (
+                DiffusionTrainConfig {
+                    overlap_max_t: 501,
+                    ..base()
+                },
+                &["overlap_max_t", "501", "1..=500"],
+            ),
+        ];
+        for (cfg, names) in cases {
+            let e = err(cfg);
+            assert!(names.iter().all(|n| e.contains(n)), "{names:?}: {e}");
+        }
     }
 
     /// A raw node row with the given centre and half-extents.

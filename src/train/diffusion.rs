@@ -1168,24 +1168,31 @@ mod tests {
 
     #[test]
     fn overlap_training_lowers_the_loss_and_records_its_settings() {
-        let data = tiny_data();
-        let dir = tempfile::tempdir().unwrap();
-        let cfg = DiffusionTrainConfig {
+        let summary = train_tiny_until_the_loss_falls(DiffusionTrainConfig {
             overlap_weight: 10.0,
             overlap_max_t: MAX_OVERLAP_T,
             ..tiny_config(60)
-        };
+        });
+        assert_eq!(summary["overlap_weight"], 10.0);
+        assert_eq!(summary["overlap_max_t"], MAX_OVERLAP_T);
+    }
+
+    /// Train `cfg` (60 steps of the tiny config) on the tiny data, assert that the loss of the
+    /// last 10 steps is below 0.8× the first 10's, and return the run's `diffusion_train.json`.
+    fn train_tiny_until_the_loss_falls(cfg: DiffusionTrainConfig) -> serde_json::Value {
+        let dir = tempfile::tempdir().unwrap();
         let mut losses = Vec::new();
-        train_diffusion(&data, &cfg, dir.path(), false, &mut |p| losses.push(p.loss)).unwrap();
+        train_diffusion(&tiny_data(), &cfg, dir.path(), false, &mut |p| {
+            losses.push(p.loss)
+        })
+        .unwrap();
         let first: f64 = losses[..10].iter().sum::<f64>() / 10.0;
         let last: f64 = losses[50..].iter().sum::<f64>() / 10.0;
         assert!(last < 0.8 * first, "loss did not fall: {first} -> {last}");
-        let summary: serde_json::Value = serde_json::from_str(
+        serde_json::from_str(
             &std::fs::read_to_string(dir.path().join("diffusion_train.json")).unwrap(),
         )
-        .unwrap();
-        assert_eq!(summary["overlap_weight"], 10.0);
-        assert_eq!(summary["overlap_max_t"], MAX_OVERLAP_T);
+        .unwrap()
     }
 
     #[test]
@@ -1318,23 +1325,10 @@ mod tests {
 
     #[test]
     fn min_snr_training_lowers_the_loss_and_records_gamma() {
-        let dir = tempfile::tempdir().unwrap();
-        let mut losses = Vec::new();
-        let cfg = DiffusionTrainConfig {
+        let summary = train_tiny_until_the_loss_falls(DiffusionTrainConfig {
             min_snr_gamma: 5.0,
             ..tiny_config(60)
-        };
-        train_diffusion(&tiny_data(), &cfg, dir.path(), false, &mut |p| {
-            losses.push(p.loss)
-        })
-        .unwrap();
-        let first: f64 = losses[..10].iter().sum::<f64>() / 10.0;
-        let last: f64 = losses[50..].iter().sum::<f64>() / 10.0;
-        assert!(last < 0.8 * first, "loss did not fall: {first} -> {last}");
-        let summary: serde_json::Value = serde_json::from_str(
-            &std::fs::read_to_string(dir.path().join("diffusion_train.json")).unwrap(),
-        )
-        .unwrap();
+        });
         assert_eq!(summary["min_snr_gamma"], 5.0);
     }
 

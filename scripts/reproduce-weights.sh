@@ -70,6 +70,7 @@ DENOISER_SHARDS=${DENOISER_SHARDS:-1}
 RESTART_STEPS=${RESTART_STEPS-"14000 21000 24500"}
 RESTART_OVERLAP=${RESTART_OVERLAP-"0 0 3"}
 RESTART_SHARDS=${RESTART_SHARDS:-2}
+DECAY_OVERLAP=${DECAY_OVERLAP:-0}
 EVAL=${EVAL:-1}
 
 if ! [[ "$DECODER_CYCLES" =~ ^[0-9]+$ ]]; then
@@ -132,6 +133,10 @@ for w in "${overlap[@]}"; do
     exit 2
   fi
 done
+if ! [[ "$DECAY_OVERLAP" =~ ^[0-9]*\.?[0-9]+$ ]]; then
+  echo "invalid DECAY_OVERLAP: need a non-negative number (the box-overlap penalty of the run that ends at STEPS), got '$DECAY_OVERLAP'" >&2
+  exit 2
+fi
 run() {
   echo "+ physnap $*" >&2
   "$PHYSNAP_BIN" "$@"
@@ -151,30 +156,41 @@ run train shape --data "$OUT/train" --out "$OUT/shape" --steps "$SHAPE_STEPS" --
 common=(--data "$OUT/train" --shape "$OUT/shape" --out "$OUT/weights"
         --batch-objects "$BATCH_OBJECTS" --noise-levels 4 --lr 5e-4
         --checkpoint-every "$CHECKPOINT_EVERY" --category-layers)
+# Only the weights' last state gets a retrieval codebook (≈ 1 min each): every denoiser run
+# but the last is continued by another, and the last one's decoder is replaced by the decoder
+# cycles when there are any (then the last install-shape builds it).
+last_codebook=(--no-codebook)
+if [ "$DECODER_STEPS" = 0 ] || [ "$DECODER_CYCLES" = 0 ]; then last_codebook=(); fi
 # Stage 1: constant learning rate, no EMA.
 # shellcheck disable=SC2086
 run train diffusion "${common[@]}" --steps "$STAGE1" --lr-final-factor 1 --ema-decay 0 \
-  --batch-shards "$DENOISER_SHARDS" $DENOISER_FLAGS
+  --batch-shards "$DENOISER_SHARDS" --no-codebook $DENOISER_FLAGS
 # Then: cosine decay from STAGE1 to 0.1 x lr over the run to STEPS, EMA 0.999 from STAGE1 (in
-# two runs when STAGE2 is set).
+# two runs when STAGE2 is set; DECAY_OVERLAP is the box-overlap penalty of the run that ends at
+# STEPS).
 decay=(--steps "$STEPS" --lr-decay-start "$STAGE1" --lr-final-factor 0.1 --ema-decay 0.999 --resume
        --batch-shards "$DENOISER_SHARDS")
 if [ "$STAGE2" != 0 ]; then
   # shellcheck disable=SC2086
-  run train diffusion "${common[@]}" "${decay[@]}" --stop-at "$STAGE2" $DENOISER_FLAGS
+  run train diffusion "${common[@]}" "${decay[@]}" --stop-at "$STAGE2" --no-codebook $DENOISER_FLAGS
 fi
+decay_codebook=(--no-codebook)
+[ "${#restarts[@]}" = 0 ] && decay_codebook=("${last_codebook[@]}")
 # shellcheck disable=SC2086
-run train diffusion "${common[@]}" "${decay[@]}" $DENOISER_FLAGS
+run train diffusion "${common[@]}" "${decay[@]}" --overlap-weight "$DECAY_OVERLAP" \
+  "${decay_codebook[@]}" $DENOISER_FLAGS
 # More cosine cycles (warm restarts): back to lr at the previous count, cosine decay to 0.1 x lr
 # at the next, the weight EMA continued. The first (14,000) lifted category accuracy
 # 59.6 % -> 76.9 % and 1-NNA 0.719 -> 0.615, but guided fits overlapped more (d14k); the
 # box-overlap penalty of a later cycle is what brings the overlap back down (EVALUATION.md).
 prev=$STEPS
 for k in "${!restarts[@]}"; do
+  cb=(--no-codebook)
+  [ "$k" = $((${#restarts[@]} - 1)) ] && cb=("${last_codebook[@]}")
   # shellcheck disable=SC2086
   run train diffusion "${common[@]}" --steps "${restarts[$k]}" --lr-decay-start "$prev" \
     --lr-final-factor 0.1 --ema-decay 0.999 --resume --batch-shards "$RESTART_SHARDS" \
-    --overlap-weight "${overlap[$k]:-0}" $DENOISER_FLAGS
+    --overlap-weight "${overlap[$k]:-0}" "${cb[@]}" $DENOISER_FLAGS
   prev=${restarts[$k]}
 done
 if [ "$DECODER_STEPS" != 0 ]; then
@@ -192,7 +208,9 @@ if [ "$DECODER_STEPS" != 0 ]; then
     run train shape --data "$OUT/train" --out "$OUT/shape_decoder$cycle" --steps "$DECODER_STEPS" \
       --seed $((cycle - 1)) --init-from "$OUT/weights" --freeze-encoder --lr 5e-4 \
       --eikonal "${eikonal[$((cycle - 1))]}" $SHAPE_BATCH $SHAPE_FLAGS $DECODER_FLAGS
-    run train install-shape --shape "$OUT/shape_decoder$cycle" --weights "$OUT/weights"
+    cb=(--no-codebook)
+    [ "$cycle" = "$DECODER_CYCLES" ] && cb=()
+    run train install-shape --shape "$OUT/shape_decoder$cycle" --weights "$OUT/weights" "${cb[@]}"
   done
 fi
 if [ "$EVAL" = 1 ]; then

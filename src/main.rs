@@ -263,6 +263,11 @@ struct InstallShapeArgs {
     /// Weights directory to update (manifest.json + shape_prior.safetensors).
     #[arg(long, env = "PHYSNAP_WEIGHTS")]
     weights: PathBuf,
+    /// Do not rebuild the retrieval codebook (≈ 1 min): for a decoder that a later cycle
+    /// replaces. The old codebook, made with the old decoder, is removed; `physnap train
+    /// codebook` builds one.
+    #[arg(long, env = "PHYSNAP_NO_CODEBOOK")]
+    no_codebook: bool,
 }
 
 #[derive(Args, Debug)]
@@ -389,6 +394,11 @@ struct ShapeArgs {
     /// near-surface queries; default 0: off, as NAP).
     #[arg(long, env = "PHYSNAP_SHAPE_EIKONAL")]
     eikonal: Option<f64>,
+    /// Each step's parts in this many slices computed in parallel (default 2: both cores busy,
+    /// ≈ 1.5× the steps per second of one pass; the same loss up to float rounding; 1 = the
+    /// single pass of runs before 2026-11-29). At most --batch-parts.
+    #[arg(long, env = "PHYSNAP_SHAPE_BATCH_SHARDS")]
+    batch_shards: Option<usize>,
 }
 
 #[derive(Args, Debug)]
@@ -466,6 +476,11 @@ struct DiffusionArgs {
     /// slices share the one device, so 1 is likely the better choice there.
     #[arg(long, env = "PHYSNAP_DIFFUSION_BATCH_SHARDS", default_value_t = 2)]
     batch_shards: usize,
+    /// Do not build the retrieval codebook (≈ 1 min) into --out: for a run that a later run
+    /// continues (--stop-at, --resume) or whose decoder a later cycle replaces. `physnap train
+    /// codebook` builds it.
+    #[arg(long, env = "PHYSNAP_NO_CODEBOOK")]
+    no_codebook: bool,
     /// Where the optimiser steps run: `cpu`, or `gpu` / `gpu:N` (Vulkan) in a binary built with
     /// `--features gpu`.
     #[arg(long, env = "PHYSNAP_TRAIN_DEVICE", default_value = "cpu")]

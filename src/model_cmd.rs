@@ -82,6 +82,7 @@ pub fn shape(a: ShapeArgs) -> anyhow::Result<()> {
         }),
         freeze_encoder: a.freeze_encoder,
         eikonal: a.eikonal.unwrap_or(defaults.eikonal),
+        batch_shards: a.batch_shards.unwrap_or(defaults.batch_shards),
         ..defaults
     };
     let pb = super::progress_bar(cfg.steps, "shape");
@@ -235,6 +236,9 @@ pub fn install_shape(a: InstallShapeArgs) -> anyhow::Result<()> {
         }
     }
     manifest.metrics = serde_json::Value::Null;
+    if a.no_codebook {
+        manifest.codebook = None;
+    }
     std::fs::write(&path, manifest_to_string(&manifest))
         .with_context(|| format!("writing {}", path.display()))?;
     println!(
@@ -242,7 +246,25 @@ pub fn install_shape(a: InstallShapeArgs) -> anyhow::Result<()> {
         a.shape.display(),
         a.weights.display()
     );
+    if a.no_codebook {
+        remove_codebook(&a.weights)?;
+        return Ok(());
+    }
     write_codebook(&a.shape, &a.weights, DEFAULT_CHECK_RESOLUTION)?;
+    Ok(())
+}
+
+/// Remove the retrieval codebook file of `weights` (the caller has written a manifest without
+/// its entry): one built with another decoder or denoiser run must not linger beside these.
+fn remove_codebook(weights: &Path) -> anyhow::Result<()> {
+    let file = weights.join(CODEBOOK_WEIGHTS_FILE);
+    if file.exists() {
+        std::fs::remove_file(&file).with_context(|| format!("removing {}", file.display()))?;
+    }
+    println!(
+        "no retrieval codebook (--no-codebook): build it with physnap train codebook --shape S --weights {}",
+        weights.display()
+    );
     Ok(())
 }
 
@@ -319,10 +341,12 @@ pub fn diffusion(a: DiffusionArgs) -> anyhow::Result<()> {
         metrics: serde_json::Value::Null,
     };
     std::fs::write(a.out.join("manifest.json"), manifest_to_string(&manifest))?;
-    // Every new weights directory gets its retrieval codebook (needs the manifest above). The
-    // weights are usable without one, so a codebook that cannot be built is a warning here
-    // (`physnap train codebook` reports it as an error).
-    if let Err(e) = write_codebook(&a.shape, &a.out, DEFAULT_CHECK_RESOLUTION) {
+    // Every new weights directory gets its retrieval codebook (needs the manifest above), unless
+    // asked not to. The weights are usable without one, so a codebook that cannot be built is a
+    // warning here (`physnap train codebook` reports it as an error).
+    if a.no_codebook {
+        remove_codebook(&a.out)?;
+    } else if let Err(e) = write_codebook(&a.shape, &a.out, DEFAULT_CHECK_RESOLUTION) {
         eprintln!("warning: weights written without a retrieval codebook: {e:#}");
     }
     println!(

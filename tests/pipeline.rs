@@ -892,6 +892,31 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     // Each cycle with its own eikonal weight, as the shipped decoder was trained: 0.01, 0.03.
     assert_eq!(cycles[0]["config"]["eikonal"], 0.01, "{m:#}");
     assert_eq!(m["training"]["shape"]["config"]["eikonal"], 0.03, "{m:#}");
+    // Only the last state gets a retrieval codebook: the five denoiser runs and the first
+    // install skip theirs (the recipe's time budget), the second install builds it (above).
+    assert_eq!(err.matches("--no-codebook").count(), 6, "{err}");
+    // Installing without one drops the stale codebook, file and manifest entry, and says how
+    // to build it; `train codebook` puts it back.
+    let d2 = out.join("shape_decoder2");
+    let said = ok(&[
+        "train",
+        "install-shape",
+        "--shape",
+        s(&d2),
+        "--weights",
+        s(&w),
+        "--no-codebook",
+    ]);
+    assert!(said.contains("physnap train codebook"), "{said}");
+    assert!(!w.join("codebook.safetensors").exists());
+    assert!(read(&w.join("manifest.json"))["codebook"].is_null());
+    ok(&["train", "codebook", "--shape", s(&d2), "--weights", s(&w)]);
+    assert!(
+        read(&w.join("manifest.json"))["codebook"]["config"]["rows"]
+            .as_u64()
+            .unwrap()
+            >= 1
+    );
     // Bad knobs are refused (exit 2, naming the knob and the value) before anything runs.
     let bad = root.path().join("bad");
     for (knobs, expect) in [
@@ -915,6 +940,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             &[("RESTART_STEPS", "8000"), ("RESTART_OVERLAP", "lots")][..],
             "lots",
         ),
+        (&[("DECAY_OVERLAP", "-1")][..], "DECAY_OVERLAP"),
     ] {
         let o = Command::new("bash")
             .arg(concat!(
@@ -946,6 +972,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             ("DENOISER_SHARDS", "2"),
             ("DECODER_CYCLES", "1"),
             ("DECODER_EIKONAL", "0"),
+            ("DECAY_OVERLAP", "2"),
         ],
     );
     let err = String::from_utf8_lossy(&o.stderr);
@@ -957,6 +984,8 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         (&serde_json::json!(4), &serde_json::json!(2)),
         "{summary:#}"
     );
+    // DECAY_OVERLAP is the penalty of the run that ends at STEPS.
+    assert_eq!(summary["overlap_weight"], 2.0, "{summary:#}");
     assert!(err.contains("--batch-shards 2"), "{err}");
     let m = read(&two.join("weights/manifest.json"));
     assert_eq!(

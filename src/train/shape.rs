@@ -163,6 +163,9 @@ pub struct ShapeTrainConfig {
     /// flatter field an L1 fit leaves (slope 0.3–0.5 on the shipped prior's surfaces, which
     /// guidance can flatten further; EVALUATION.md).
     pub eikonal: f64,
+    /// Each step's parts in this many contiguous slices whose forward and backward passes run
+    /// in parallel ([`sharded_loss`]; 1 = the single pass of the runs before 2026-11-29).
+    pub batch_shards: usize,
 }
 
 /// Finite-difference step of the eikonal term, normalised units (a third of a 64³ IoU cell).
@@ -220,6 +223,7 @@ impl Default for ShapeTrainConfig {
             init_from: None,
             freeze_encoder: false,
             eikonal: 0.0,
+            batch_shards: 2,
         }
     }
 }
@@ -241,6 +245,7 @@ impl ShapeTrainConfig {
         };
         range("steps", self.steps, 1, 100_000_000)?;
         range("batch_parts", self.batch_parts, 1, 4096)?;
+        range("batch_shards", self.batch_shards, 1, self.batch_parts)?;
         range("queries_per_part", self.queries_per_part, 2, 1 << 20)?;
         if !self.queries_per_part.is_multiple_of(2) {
             return Err(TrainError::config(
@@ -363,6 +368,7 @@ impl ShapeTrainConfig {
             "init_from": self.init_from.as_ref().map(|p| p.display().to_string()),
             "freeze_encoder": self.freeze_encoder,
             "eikonal": self.eikonal,
+            "batch_shards": self.batch_shards,
         })
     }
 }
@@ -692,6 +698,18 @@ struct Batch {
     surf: Vec<f32>,
 }
 
+impl Batch {
+    /// Parts `start..end` of the batch.
+    fn slice(&self, start: usize, end: usize, cfg: &ShapeTrainConfig) -> Batch {
+        let (q, s) = (cfg.queries_per_part, cfg.surface_points);
+        Batch {
+            pts: self.pts[start * q * 3..end * q * 3].to_vec(),
+            tgt: self.tgt[start * q..end * q].to_vec(),
+            surf: self.surf[start * s * 3..end * s * 3].to_vec(),
+        }
+    }
+}
+
 fn sample_batch(
     parts: &[PartSamples],
     order: &[usize],
@@ -946,14 +964,12 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), TrainError> {
 
 /// Save `model`'s weights (f32 safetensors; keys are the module paths, e.g.
 /// `decoder.blocks.0.fc_0.weight`, Linear weights stored `[in, out]` as burn holds them).
+/// The header's metadata is written in sorted order (`model::weights::to_bytes`), so equal
+/// weights give equal files and equal sha256 (burn writes it in hash order).
 pub fn save_shape_prior(model: &ShapePrior, path: &Path) -> Result<(), TrainError> {
-    let mut store = SafetensorsStore::from_file(path)
-        .overwrite(true)
-        .metadata("physnap", "shape_prior");
-    model
-        .valid()
-        .save_into(&mut store)
-        .map_err(|e| TrainError::data(path, e.to_string()))
+    let bytes = crate::model::weights::to_bytes(&model.valid())
+        .map_err(|e| TrainError::data(path, e.to_string()))?;
+    write_atomic(path, &bytes)
 }
 
 /// Load weights written by [`save_shape_prior`] into a model of size `cfg` on `device`.
@@ -1483,6 +1499,57 @@ fn batch_loss(
     }
 }
 
+/// The batch's loss value and its gradients, computed in `cfg.batch_shards` contiguous slices of
+/// (nearly) equal part counts, as `train diffusion` does (its `sharded_step`): each slice runs
+/// [`batch_loss`] on its own fork of the model (fresh autodiff leaves, the same parameter ids)
+/// in parallel on the rayon pool, its loss weighted by its share of the parts. Every term is a
+/// mean over parts with the same number of rows each (L1, eikonal, w_reg · mean(z²)), so the
+/// weighted sum is the whole batch's loss and gradient up to float rounding. Gradients are
+/// summed in slice order whatever the thread timing, so a run is deterministic for a given
+/// shard count at a fixed thread count. Why: the step's single pass keeps only ≈ 1.3 of the two
+/// cores busy; two slices keep both.
+fn sharded_loss(
+    model: &ShapePrior,
+    batch: Batch,
+    cfg: &ShapeTrainConfig,
+    device: &Device,
+) -> (f64, GradientsParams) {
+    let b = batch.tgt.len() / cfg.queries_per_part;
+    let shards = cfg.batch_shards.clamp(1, b.max(1));
+    if shards == 1 {
+        let (loss, value) = batch_loss(model, batch, cfg, device);
+        return (value, GradientsParams::from_grads(loss.backward(), model));
+    }
+    let slices: Vec<(ShapePrior, Batch, f64)> = (0..shards)
+        .map(|k| {
+            let (start, end) = (k * b / shards, (k + 1) * b / shards);
+            (
+                model.clone().fork(device),
+                batch.slice(start, end, cfg),
+                (end - start) as f64 / b as f64,
+            )
+        })
+        .collect();
+    let results: Vec<(f64, GradientsParams)> = slices
+        .into_par_iter()
+        .map(|(m, slice, share)| {
+            let (loss, value) = batch_loss(&m, slice, cfg, device);
+            let loss = loss.mul_scalar(share as f32);
+            (
+                value * share,
+                GradientsParams::from_grads(loss.backward(), &m),
+            )
+        })
+        .collect();
+    let mut acc = burn::optim::GradientsAccumulator::<ShapePrior>::new();
+    let mut value = 0.0;
+    for (v, g) in results {
+        value += v;
+        acc.accumulate(model, g);
+    }
+    (value, acc.grads())
+}
+
 /// The optimisation state of a run: model, Adam, batch sampler.
 struct Trainer<'a> {
     cfg: &'a ShapeTrainConfig,
@@ -1534,11 +1601,10 @@ impl<'a> Trainer<'a> {
         }
         let batch = sample_batch(self.parts, &order, cfg, &mut self.rng);
         let model = self.model.take().expect("model is present between steps");
-        let (loss, value) = batch_loss(&model, batch, cfg, &self.device);
+        let (value, grads) = sharded_loss(&model, batch, cfg, &self.device);
         if !value.is_finite() || value > DIVERGED_LOSS {
             return Err(TrainError::Diverged { step, loss: value });
         }
-        let grads = GradientsParams::from_grads(loss.backward(), &model);
         let lr = cfg.lr_at(step);
         let model = self.optim.step(lr, model, grads);
         if let Some(ema) = self.ema.as_mut() {
@@ -2187,6 +2253,48 @@ mod tests {
     /// evaluations are kept, the checkpoint is removed at the end; a resume with other training
     /// options or mismatching weights is refused, naming the field or the file.
     #[test]
+    fn sharded_steps_match_the_single_pass_and_are_deterministic() {
+        // Two or three slices of the parts in parallel give the whole batch's loss and gradient
+        // (L1, eikonal and code regulariser alike) up to float rounding, so a short run tracks
+        // the single pass closely; and a sharded run repeats bit for bit.
+        let data = tiny_dataset(39);
+        let train = data.path().join("train");
+        let run = |shards: usize, out: &str| {
+            let cfg = ShapeTrainConfig {
+                steps: 8,
+                eval_every: 0,
+                val_parts: 0,
+                checkpoint_every: 0,
+                eikonal: 0.1,
+                batch_shards: shards,
+                ..tiny_config()
+            };
+            let mut losses = Vec::new();
+            let dir = data.path().join(out);
+            train_shape(&train, &cfg, &dir, &mut |p| losses.push(p.loss)).unwrap();
+            (losses, std::fs::read(dir.join(WEIGHTS_FILE)).unwrap())
+        };
+        let (one, w1) = run(1, "one");
+        let (two, w2) = run(2, "two");
+        let (three, _) = run(3, "three");
+        assert_eq!(one.len(), 8);
+        for (k, ((a, b), c)) in one.iter().zip(&two).zip(&three).enumerate() {
+            assert!(
+                (a - b).abs() <= 1e-4 * a.abs(),
+                "step {k}: {a} vs {b} (2 shards)"
+            );
+            assert!(
+                (a - c).abs() <= 1e-4 * a.abs(),
+                "step {k}: {a} vs {c} (3 shards)"
+            );
+        }
+        assert_ne!(w1, w2, "two slices should round differently from one pass");
+        let (again, w2b) = run(2, "again");
+        assert_eq!(two, again);
+        assert!(w2 == w2b, "the repeated run's weights differ");
+    }
+
+    #[test]
     fn stopped_run_resumes_from_its_checkpoint() {
         let data = tiny_dataset(39); // enough objects for a val split
         let train = data.path().join("train");
@@ -2478,6 +2586,15 @@ mod tests {
         let e = cfg.validate().unwrap_err().to_string();
         assert!(
             e.contains("eikonal") && e.contains("between 0 and 100") && e.contains("-0.5"),
+            "{e}"
+        );
+        let cfg = ShapeTrainConfig {
+            batch_shards: 17,
+            ..ShapeTrainConfig::default()
+        };
+        let e = cfg.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("batch_shards") && e.contains("between 1 and 16") && e.contains("17"),
             "{e}"
         );
         // The host backward pass is CPU code: a GPU run must take burn's.

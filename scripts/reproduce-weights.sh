@@ -71,6 +71,7 @@ RESTART_STEPS=${RESTART_STEPS-"14000 21000 24500"}
 RESTART_OVERLAP=${RESTART_OVERLAP-"0 0 3"}
 RESTART_SHARDS=${RESTART_SHARDS:-2}
 DECAY_OVERLAP=${DECAY_OVERLAP:-0}
+SHAPE_SHARDS=${SHAPE_SHARDS:-2}
 EVAL=${EVAL:-1}
 
 if ! [[ "$DECODER_CYCLES" =~ ^[0-9]+$ ]]; then
@@ -88,7 +89,7 @@ if [ "$DECODER_STEPS" != 0 ] && [ "${#eikonal[@]}" != "$DECODER_CYCLES" ]; then
   echo "invalid DECODER_EIKONAL: need one eikonal weight per decoder cycle ($DECODER_CYCLES), got ${#eikonal[@]}: '$DECODER_EIKONAL'" >&2
   exit 2
 fi
-for knob in DENOISER_SHARDS RESTART_SHARDS; do
+for knob in DENOISER_SHARDS RESTART_SHARDS SHAPE_SHARDS; do
   if ! [[ "${!knob}" =~ ^[1-9][0-9]*$ ]]; then
     echo "invalid $knob: need a whole number of batch slices, at least 1, got '${!knob}'" >&2
     exit 2
@@ -152,7 +153,7 @@ run data import --partnet-mobility "$OUT/synth" --out "$OUT/train" $IMPORT_FLAGS
 # differences grow over training, so the recipe names the shipped path.
 # shellcheck disable=SC2086
 run train shape --data "$OUT/train" --out "$OUT/shape" --steps "$SHAPE_STEPS" --seed 0 \
-  --decoder-backward "$SHAPE_BACKWARD" $SHAPE_BATCH $SHAPE_FLAGS
+  --decoder-backward "$SHAPE_BACKWARD" --batch-shards "$SHAPE_SHARDS" $SHAPE_BATCH $SHAPE_FLAGS
 common=(--data "$OUT/train" --shape "$OUT/shape" --out "$OUT/weights"
         --batch-objects "$BATCH_OBJECTS" --noise-levels 4 --lr 5e-4
         --checkpoint-every "$CHECKPOINT_EVERY" --category-layers)
@@ -207,7 +208,8 @@ if [ "$DECODER_STEPS" != 0 ]; then
     # shellcheck disable=SC2086
     run train shape --data "$OUT/train" --out "$OUT/shape_decoder$cycle" --steps "$DECODER_STEPS" \
       --seed $((cycle - 1)) --init-from "$OUT/weights" --freeze-encoder --lr 5e-4 \
-      --eikonal "${eikonal[$((cycle - 1))]}" $SHAPE_BATCH $SHAPE_FLAGS $DECODER_FLAGS
+      --eikonal "${eikonal[$((cycle - 1))]}" --batch-shards "$SHAPE_SHARDS" $SHAPE_BATCH $SHAPE_FLAGS \
+      $DECODER_FLAGS
     cb=(--no-codebook)
     [ "$cycle" = "$DECODER_CYCLES" ] && cb=()
     run train install-shape --shape "$OUT/shape_decoder$cycle" --weights "$OUT/weights" "${cb[@]}"

@@ -395,8 +395,9 @@ struct ShapeArgs {
     #[arg(long, env = "PHYSNAP_SHAPE_EIKONAL")]
     eikonal: Option<f64>,
     /// Each step's parts in this many slices computed in parallel (default 2: both cores busy,
-    /// ≈ 1.5× the steps per second of one pass; the same loss up to float rounding; 1 = the
-    /// single pass of runs before 2026-11-29). At most --batch-parts.
+    /// 1.33× the steps per second of one pass on the recipe's first prior, 1.18× on a decoder
+    /// cycle; the same loss up to float rounding; 1 = the single pass of runs before
+    /// 2026-11-29). At most --batch-parts.
     #[arg(long, env = "PHYSNAP_SHAPE_BATCH_SHARDS")]
     batch_shards: Option<usize>,
 }

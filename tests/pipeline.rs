@@ -880,6 +880,11 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             m["training"][stage]["config"]["queries_per_part"], 64,
             "{stage}: {m:#}"
         );
+        // Both cores: the parts of each step in two slices (SHAPE_SHARDS).
+        assert_eq!(
+            m["training"][stage]["config"]["batch_shards"], 2,
+            "{stage}: {m:#}"
+        );
     }
     // The denoiser takes the shipped denoiser's step by default (one batch slice); the
     // restart cycles (RESTART_STEPS, here 7 and 8) take two.
@@ -941,6 +946,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             "lots",
         ),
         (&[("DECAY_OVERLAP", "-1")][..], "DECAY_OVERLAP"),
+        (&[("SHAPE_SHARDS", "0")][..], "SHAPE_SHARDS"),
     ] {
         let o = Command::new("bash")
             .arg(concat!(
@@ -973,6 +979,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             ("DECODER_CYCLES", "1"),
             ("DECODER_EIKONAL", "0"),
             ("DECAY_OVERLAP", "2"),
+            ("SHAPE_SHARDS", "1"),
         ],
     );
     let err = String::from_utf8_lossy(&o.stderr);
@@ -994,4 +1001,5 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     );
     assert_eq!(m["training"]["shape"]["config"]["eikonal"], 0.0, "{m:#}");
     assert!(m["training"]["shape_cycles"].is_null(), "one cycle: {m:#}");
+    assert_eq!(m["training"]["shape_base"]["config"]["batch_shards"], 1, "{m:#}");
 }

@@ -1213,23 +1213,7 @@ mod tests {
                 .unwrap();
             (losses, std::fs::read(r.weights).unwrap())
         };
-        let (one, w1) = run(1);
-        let (two, w2) = run(2);
-        let (three, _) = run(3);
-        for (k, ((a, b), c)) in one.iter().zip(&two).zip(&three).enumerate() {
-            assert!(
-                (a - b).abs() <= 1e-4 * a.abs(),
-                "step {k}: {a} vs {b} (2 shards)"
-            );
-            assert!(
-                (a - c).abs() <= 1e-4 * a.abs(),
-                "step {k}: {a} vs {c} (3 shards)"
-            );
-        }
-        assert_ne!(w1, w2, "two shards should round differently from one pass");
-        let (again, w2b) = run(2);
-        assert_eq!(two, again);
-        assert!(w2 == w2b, "the repeated run's weights differ");
+        super::super::check_sharded_runs(run);
     }
 
     #[test]

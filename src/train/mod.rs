@@ -103,3 +103,30 @@ impl TrainError {
         }
     }
 }
+
+/// The check both trainers' batch-slice tests share. `run(k)` trains a short run with the batch
+/// in k slices and returns its per-step losses and its weights file. Two and three slices must
+/// track the single pass within 1e-4 per step (the same loss and gradient up to float
+/// rounding), round differently from it (so the slices really ran), and a repeated two-slice
+/// run must give the same losses and the same file, bit for bit.
+#[cfg(test)]
+pub(crate) fn check_sharded_runs(mut run: impl FnMut(usize) -> (Vec<f64>, Vec<u8>)) {
+    let (one, w1) = run(1);
+    let (two, w2) = run(2);
+    let (three, _) = run(3);
+    assert!(!one.is_empty() && one.len() == two.len() && one.len() == three.len());
+    for (k, ((a, b), c)) in one.iter().zip(&two).zip(&three).enumerate() {
+        assert!(
+            (a - b).abs() <= 1e-4 * a.abs(),
+            "step {k}: {a} vs {b} (2 shards)"
+        );
+        assert!(
+            (a - c).abs() <= 1e-4 * a.abs(),
+            "step {k}: {a} vs {c} (3 shards)"
+        );
+    }
+    assert_ne!(w1, w2, "two shards should round differently from one pass");
+    let (again, w2b) = run(2);
+    assert_eq!(two, again);
+    assert!(w2 == w2b, "the repeated run's weights differ");
+}

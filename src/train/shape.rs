@@ -2259,6 +2259,7 @@ mod tests {
         // the single pass closely; and a sharded run repeats bit for bit.
         let data = tiny_dataset(39);
         let train = data.path().join("train");
+        let mut runs = 0..;
         let run = |shards: usize, out: &str| {
             let cfg = ShapeTrainConfig {
                 steps: 8,
@@ -2274,24 +2275,7 @@ mod tests {
             train_shape(&train, &cfg, &dir, &mut |p| losses.push(p.loss)).unwrap();
             (losses, std::fs::read(dir.join(WEIGHTS_FILE)).unwrap())
         };
-        let (one, w1) = run(1, "one");
-        let (two, w2) = run(2, "two");
-        let (three, _) = run(3, "three");
-        assert_eq!(one.len(), 8);
-        for (k, ((a, b), c)) in one.iter().zip(&two).zip(&three).enumerate() {
-            assert!(
-                (a - b).abs() <= 1e-4 * a.abs(),
-                "step {k}: {a} vs {b} (2 shards)"
-            );
-            assert!(
-                (a - c).abs() <= 1e-4 * a.abs(),
-                "step {k}: {a} vs {c} (3 shards)"
-            );
-        }
-        assert_ne!(w1, w2, "two slices should round differently from one pass");
-        let (again, w2b) = run(2, "again");
-        assert_eq!(two, again);
-        assert!(w2 == w2b, "the repeated run's weights differ");
+        super::super::check_sharded_runs(|k| run(k, &format!("run{}", runs.next().unwrap())));
     }
 
     #[test]

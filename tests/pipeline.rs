@@ -25,6 +25,14 @@ fn ok(args: &[&str]) -> String {
     String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
+/// How many `train diffusion` runs the recipe script logged (`+ physnap …` on stderr) with
+/// `flag`.
+fn diffusion_runs_with(err: &str, flag: &str) -> usize {
+    err.lines()
+        .filter(|l| l.starts_with("+ physnap train diffusion") && l.contains(flag))
+        .count()
+}
+
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
@@ -887,17 +895,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         );
     }
     // Every denoiser run takes two batch slices by default, as the shipped denoiser was trained.
-    let diffusion_runs = || {
-        err.lines()
-            .filter(|l| l.starts_with("+ physnap train diffusion"))
-    };
-    assert_eq!(
-        diffusion_runs()
-            .filter(|l| l.contains("--batch-shards 2"))
-            .count(),
-        5,
-        "{err}"
-    );
+    assert_eq!(diffusion_runs_with(&err, "--batch-shards 2"), 5, "{err}");
     let cycles = m["training"]["shape_cycles"].as_array().unwrap();
     assert_eq!(cycles.len(), 1, "{m:#}");
     assert_eq!(cycles[0]["config"]["seed"], 0, "{m:#}");
@@ -1001,13 +999,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     );
     // DECAY_OVERLAP is the penalty of the run that ends at STEPS.
     assert_eq!(summary["overlap_weight"], 2.0, "{summary:#}");
-    assert_eq!(
-        err.lines()
-            .filter(|l| l.starts_with("+ physnap train diffusion") && l.contains("--batch-shards 1"))
-            .count(),
-        2,
-        "{err}"
-    );
+    assert_eq!(diffusion_runs_with(&err, "--batch-shards 1"), 2, "{err}");
     let m = read(&two.join("weights/manifest.json"));
     assert_eq!(
         m["training"]["shape_base"]["config"]["decoder_backward"], "burn",

@@ -528,13 +528,7 @@ fn sharded_step(
         .into_par_iter()
         .map(|(m, b, share)| run(&m, b, Some(share)))
         .collect();
-    let mut acc = burn::optim::GradientsAccumulator::<Denoiser>::new();
-    let mut value = 0.0;
-    for (v, g) in results {
-        value += v;
-        acc.accumulate(model, g);
-    }
-    (value, acc.grads())
+    super::sum_slices(model, results)
 }
 
 /// What the run did.

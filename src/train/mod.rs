@@ -104,6 +104,22 @@ impl TrainError {
     }
 }
 
+/// The batch's loss and gradient from its slices' (both trainers' `--batch-shards`): the
+/// values and gradients summed in slice order, so the result does not depend on which thread
+/// finished first.
+pub(crate) fn sum_slices<M: burn::module::Module>(
+    model: &M,
+    slices: Vec<(f64, burn::optim::GradientsParams)>,
+) -> (f64, burn::optim::GradientsParams) {
+    let mut acc = burn::optim::GradientsAccumulator::<M>::new();
+    let mut value = 0.0;
+    for (v, g) in slices {
+        value += v;
+        acc.accumulate(model, g);
+    }
+    (value, acc.grads())
+}
+
 /// The check both trainers' batch-slice tests share. `run(k)` trains a short run with the batch
 /// in k slices and returns its per-step losses and its weights file. Two and three slices must
 /// track the single pass within 1e-4 per step (the same loss and gradient up to float

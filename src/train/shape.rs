@@ -1541,13 +1541,7 @@ fn sharded_loss(
             )
         })
         .collect();
-    let mut acc = burn::optim::GradientsAccumulator::<ShapePrior>::new();
-    let mut value = 0.0;
-    for (v, g) in results {
-        value += v;
-        acc.accumulate(model, g);
-    }
-    (value, acc.grads())
+    super::sum_slices(model, results)
 }
 
 /// The optimisation state of a run: model, Adam, batch sampler.
@@ -2247,11 +2241,6 @@ mod tests {
         );
     }
 
-    /// A run split by `stop_at` + `resume` continues the same batch stream and report: the
-    /// first resumed step's loss (the checkpoint's weights on the next batch, before any Adam
-    /// update) equals the uninterrupted run's bit for bit, the first piece's losses and
-    /// evaluations are kept, the checkpoint is removed at the end; a resume with other training
-    /// options or mismatching weights is refused, naming the field or the file.
     #[test]
     fn sharded_steps_match_the_single_pass_and_are_deterministic() {
         // Two or three slices of the parts in parallel give the whole batch's loss and gradient
@@ -2278,6 +2267,11 @@ mod tests {
         super::super::check_sharded_runs(|k| run(k, &format!("run{}", runs.next().unwrap())));
     }
 
+    /// A run split by `stop_at` + `resume` continues the same batch stream and report: the
+    /// first resumed step's loss (the checkpoint's weights on the next batch, before any Adam
+    /// update) equals the uninterrupted run's bit for bit, the first piece's losses and
+    /// evaluations are kept, the checkpoint is removed at the end; a resume with other training
+    /// options or mismatching weights is refused, naming the field or the file.
     #[test]
     fn stopped_run_resumes_from_its_checkpoint() {
         let data = tiny_dataset(39); // enough objects for a val split

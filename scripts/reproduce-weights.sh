@@ -18,10 +18,9 @@
 # fortieth session, "s14r"; weights/README.md "How they were made"; the shipped shape prior and
 # its cycles were trained before --batch-shards existed, with the single pass, SHAPE_SHARDS=1:
 # the same loss up to float rounding, 1.33x / 1.18x slower per step).
-# About 2 h 50 min on 2 idle cores without the evaluations, estimated from the runs that made
-# the shipped files and the two-slice rates (BENCHMARKS.md "Training the shipped weights"): the
-# first prior ≈ 62 min, the denoiser ≈ 67 min (measured: 3,957 s of training), each decoder
-# cycle ≈ 19 min, the codebook ≈ 1-2 min. Inside the 3-hour budget.
+# About 2 h 15 min on 2 idle cores without the evaluations (BENCHMARKS.md "The recipe timed"):
+# the first prior 47 min, the denoiser 66 min, each decoder cycle 10 min, the codebook 1 min.
+# Inside the 3-hour budget.
 #
 # Knobs (environment; the defaults are the shipped recipe, smaller values make a smoke run):
 #   PHYSNAP_BIN   physnap binary (default: cargo build --release, then target/release/physnap)

@@ -610,6 +610,9 @@ fn record_in_manifest(
 
 /// Most parts `eval shape` evaluates (each costs a 64³ decode and its ground truth).
 const MAX_SHAPE_PARTS: usize = 5000;
+/// Most encoder points `eval shape --surface-points` takes (a part's surface file has 1,024;
+/// more are repeats).
+const MAX_SURFACE_POINTS: usize = 8192;
 
 /// `physnap eval reconstruction`: test objects passed through the representation the denoiser
 /// learns (their `graph.npy`, each part's code from the shape prior's encoder, projection,
@@ -955,11 +958,23 @@ pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
             a.fit_codes
         );
     }
+    if let Some(n) = a.surface_points
+        && !(1..=MAX_SURFACE_POINTS).contains(&n)
+    {
+        bail!("invalid --surface-points {n}: must be between 1 and {MAX_SURFACE_POINTS}");
+    }
+    if a.write_manifest && a.surface_points.is_some() {
+        bail!(
+            "--write-manifest records the IoU of the codes the codebook uses; --surface-points \
+             measures another encoder input (keep it with --out)"
+        );
+    }
     let (shape_prior, model_cfg, report) = load_any_shape_prior(&a.weights)?;
     let defaults = ShapeTrainConfig::default();
-    let surface_points = report["config"]["surface_points"]
+    let trained_points = report["config"]["surface_points"]
         .as_u64()
         .map_or(defaults.surface_points, |n| n as usize);
+    let surface_points = a.surface_points.unwrap_or(trained_points);
     let cfg = ShapeTrainConfig {
         model: model_cfg,
         surface_points,
@@ -988,7 +1003,7 @@ pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
     let pick = |keep: &dyn Fn(&PartIou) -> bool| -> Vec<&PartIou> {
         all.iter().copied().filter(|p| keep(p)).collect()
     };
-    let groups: [(&str, Vec<&PartIou>); 5] = [
+    let groups: [(&str, Vec<&PartIou>); 7] = [
         ("all", all.clone()),
         ("single primitive", pick(&|p| p.primitives == Some(1))),
         (
@@ -997,6 +1012,16 @@ pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
         ),
         ("mesh", pick(&|p| p.primitives.is_none())),
         ("thinner than a grid cell", pick(&|p| p.thinnest < cell)),
+        // Where the IoU is lost: walls and panels under a cell thick, whose cells flip in or
+        // out of the part with a surface error of a fraction of a cell.
+        (
+            "a primitive under a cell",
+            pick(&|p| p.thinnest_primitive.is_some_and(|t| t < cell)),
+        ),
+        (
+            "every primitive >= 2 cells",
+            pick(&|p| p.thinnest_primitive.is_some_and(|t| t >= 2.0 * cell)),
+        ),
     ];
     println!(
         "shape prior of {}: {} {} parts of {}, {}³ grid (cell {cell:.4}), {:.0} s",
@@ -1017,6 +1042,12 @@ pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
         println!(
             "  codes fitted to each part's samples ({} Adam steps, decoder frozen), not encoded",
             a.fit_codes
+        );
+    }
+    if surface_points != trained_points {
+        println!(
+            "  encoder input: {surface_points} surface points a part (trained with, and the \
+             codebook uses, {trained_points})"
         );
     }
     let summary = json!({
@@ -1047,6 +1078,7 @@ pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
             .map(|p| {
                 json!({
                     "key": p.key, "iou": p.iou, "primitives": p.primitives, "thinnest": p.thinnest,
+                    "thinnest_primitive": p.thinnest_primitive,
                 })
             })
             .collect();

@@ -88,7 +88,8 @@ enum EvalCommand {
     /// paper's Table 1 layout; writes guided_table.md and guided_table.json.
     Guided(Box<EvalGuidedArgs>),
     /// Shape prior IoU (issue 4's "mean IoU on val parts at a 64³ grid"): per part and by kind
-    /// (single primitive, several primitives, mesh, thinner than a grid cell), plus SDF L1.
+    /// (single primitive, several primitives, mesh, thinner than a grid cell, with a primitive
+    /// under a cell thick, every primitive at least 2 cells thick), plus SDF L1.
     Shape(EvalShapeArgs),
     /// Test objects passed through the representation (graph, shape codes from the encoder,
     /// projection, decoder meshing) against the originals: what the shape prior loses, and
@@ -163,6 +164,11 @@ struct EvalShapeArgs {
     /// encoder's. 0 (default): the encoder's codes, as the codebook and the target use.
     #[arg(long, env = "PHYSNAP_EVAL_FIT_CODES", default_value_t = 0)]
     fit_codes: usize,
+    /// Encoder input: the first N surface points of each part (cycled when a part has fewer).
+    /// Default: the count the prior was trained with, which the codebook and so the denoiser
+    /// use; another count measures what the encoder makes of more or fewer points.
+    #[arg(long, env = "PHYSNAP_EVAL_SURFACE_POINTS")]
+    surface_points: Option<usize>,
 }
 
 #[derive(Args, Debug)]
@@ -383,6 +389,10 @@ struct ShapeArgs {
     /// Truncate the L1 loss to the band [−δ, δ] (DeepSDF); default: plain L1, as NAP.
     #[arg(long, env = "PHYSNAP_SHAPE_TRUNCATION")]
     truncation: Option<f32>,
+    /// Weight w of the wrong-side term w · mean relu(−f̂ · sign f): queries on the wrong side
+    /// of the surface count 1 + w times (default 0: off, as NAP).
+    #[arg(long, env = "PHYSNAP_SHAPE_WRONG_SIDE")]
+    wrong_side: Option<f64>,
     /// Weight EMA decay, e.g. 0.999 (default 0: off). With an EMA the val IoU, the saved
     /// weights and the codebook use the averaged weights.
     #[arg(long, env = "PHYSNAP_SHAPE_EMA_DECAY")]

@@ -58,6 +58,7 @@ pub fn shape(a: ShapeArgs) -> anyhow::Result<()> {
         lr: a.lr.unwrap_or(defaults.lr),
         lr_final_factor: a.lr_final_factor.unwrap_or(defaults.lr_final_factor),
         truncation: a.truncation.or(defaults.truncation),
+        wrong_side: a.wrong_side.unwrap_or(defaults.wrong_side),
         ema_decay: a.ema_decay.unwrap_or(defaults.ema_decay),
         val_parts: a.val_parts.unwrap_or(defaults.val_parts),
         steps: a.steps,

@@ -409,6 +409,22 @@ fn synth_import_train_generate() {
     let parts = r["parts"].as_array().unwrap();
     assert!((1..=3).contains(&parts.len()), "{r}");
     assert_eq!(r["split"], "val");
+    // Synthetic parts are primitives: each reports its thinnest wall, which is no thicker
+    // than the part's thinnest box extent, and the wall groups are listed.
+    for p in parts {
+        let wall = p["thinnest_primitive"].as_f64().unwrap();
+        assert!(
+            wall > 0.0 && wall <= p["thinnest"].as_f64().unwrap() + 1e-9,
+            "{p}"
+        );
+    }
+    let groups: Vec<&str> = r["groups"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|g| g["name"].as_str().unwrap())
+        .collect();
+    assert!(groups.contains(&"a primitive under a cell"), "{groups:?}");
     let mean = r["mean_iou"].as_f64().unwrap();
     let by_hand = parts
         .iter()
@@ -464,6 +480,50 @@ fn synth_import_train_generate() {
         err.contains("--write-manifest") && err.contains("--fit-codes 5"),
         "{err}"
     );
+    // Another encoder input is measured and reported as such, never recorded; out of range is
+    // refused with the limit.
+    let more = root.path().join("shape_more_points.json");
+    let shape_eval = |extra: &[&str]| {
+        let mut args = vec![
+            "eval",
+            "shape",
+            "--weights",
+            s(&weights),
+            "--data",
+            s(&data),
+            "--parts",
+            "3",
+            "--resolution",
+            "16",
+        ];
+        args.extend_from_slice(extra);
+        physnap(&args)
+    };
+    let o = shape_eval(&["--surface-points", "96", "--out", s(&more)]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("encoder input: 96 surface points"),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    let more: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&more).unwrap()).unwrap();
+    assert_eq!(more["surface_points"], 96);
+    for (flags, want) in [
+        (
+            &["--surface-points", "0"][..],
+            "invalid --surface-points 0: must be between 1 and 8192",
+        ),
+        (
+            &["--surface-points", "96", "--write-manifest"][..],
+            "--surface-points",
+        ),
+    ] {
+        let o = shape_eval(flags);
+        assert!(!o.status.success(), "{flags:?}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(want), "{flags:?}: {err}");
+    }
     // `eval generative` at toy scale: category accuracy searches the whole test split.
     let report = root.path().join("generative.json");
     let out = ok(&[

@@ -15,7 +15,9 @@
 //!   the part has enough); loss =
 //!   mean |f̂ − f| + w_reg · mean(z²), optionally truncated to the band [−δ, δ], optionally
 //!   plus the eikonal term w_eik · mean (|∇̃f| − 1)² on a quarter of the near-surface queries
-//!   (forward differences, [`EIKONAL_STEP`]; off by default);
+//!   (forward differences, [`EIKONAL_STEP`]; off by default), optionally plus the wrong-side
+//!   term w_ws · mean relu(−f̂ · sign f), which weighs the queries on the wrong side of the
+//!   surface 1 + w_ws times (off by default);
 //! - Adam with a cosine decay from `lr` to `lr · lr_final_factor`;
 //! - every `eval_every` steps and at the end: mean IoU of `SDF < 0` against ground truth on a
 //!   `iou_resolution`³ grid of cell centres over [−0.55, 0.55]³, codes encoded from each val
@@ -80,7 +82,7 @@ pub const EMA_CHECKPOINT_FILE: &str = "shape_prior_ema.checkpoint.safetensors";
 /// The config fields a resumed run must share with its checkpoint (they define the run's
 /// batches, schedule and model); the others (threads, evaluation, checkpointing, the decoder's
 /// backward implementation) may change between pieces.
-const RESUME_FIELDS: [&str; 14] = [
+const RESUME_FIELDS: [&str; 15] = [
     "model",
     "max_parts",
     "steps",
@@ -92,6 +94,7 @@ const RESUME_FIELDS: [&str; 14] = [
     "lr_final_factor",
     "w_reg",
     "truncation",
+    "wrong_side",
     "seed",
     "ema_decay",
     "freeze_encoder",
@@ -126,6 +129,11 @@ pub struct ShapeTrainConfig {
     /// Truncate the L1 loss to the band [−δ, δ] (see [`truncated_residual`]; None: plain L1 as
     /// NAP).
     pub truncation: Option<f32>,
+    /// Weight w of the wrong-side term w · mean relu(−f̂ · sign f) ([`wrong_side`]; 0: off, as
+    /// NAP). It adds w to the L1 gradient of every query whose predicted sign is wrong: the
+    /// IoU counts signs, and a thin wall's inside queries cost the L1 fit little when the
+    /// decoder smooths the wall away (|f| ≤ half its thickness).
+    pub wrong_side: f64,
     /// Seed of weight init and batch sampling.
     pub seed: u64,
     /// Weight EMA decay (0: off, the raw weights are the result). With an EMA the evaluations,
@@ -208,6 +216,7 @@ impl Default for ShapeTrainConfig {
             lr_final_factor: 0.1,
             w_reg: 1e-3,
             truncation: None,
+            wrong_side: 0.0,
             seed: 0,
             ema_decay: 0.0,
             eval_every: 1000,
@@ -281,6 +290,13 @@ impl ShapeTrainConfig {
         }
         if let Some(d) = self.truncation {
             positive("truncation", d as f64, 0.0, 10.0)?;
+        }
+        if !(self.wrong_side.is_finite() && (0.0..=100.0).contains(&self.wrong_side)) {
+            return Err(TrainError::config(
+                "wrong_side",
+                "between 0 and 100 (0 turns it off)",
+                self.wrong_side,
+            ));
         }
         if !(self.ema_decay.is_finite() && (0.0..1.0).contains(&self.ema_decay)) {
             return Err(TrainError::config(
@@ -356,6 +372,7 @@ impl ShapeTrainConfig {
             "lr_final_factor": self.lr_final_factor,
             "w_reg": self.w_reg,
             "truncation": self.truncation,
+            "wrong_side": self.wrong_side,
             "seed": self.seed,
             "ema_decay": self.ema_decay,
             "eval_every": self.eval_every,
@@ -848,6 +865,26 @@ pub struct PartIou {
     /// Thinnest box extent over the part's normalisation scale κ (the AABB diagonal), i.e. in
     /// normalised units where the grid spacing is 1.1 / resolution.
     pub thinnest: f64,
+    /// Smallest extent of the thinnest analytic primitive over κ (normalised units): the
+    /// part's thinnest wall, panel or detail. None for a mesh part. A cabinet shell's walls
+    /// are often under one 64³ cell, where a surface error of a quarter cell moves a whole
+    /// wall's cells in or out of the IoU.
+    pub thinnest_primitive: Option<f64>,
+}
+
+/// The smallest extent of `part`'s thinnest primitive over its κ (see [`PartIou`]); None
+/// when the part has no analytic primitives.
+pub fn thinnest_primitive(part: &crate::object::Part) -> Option<f64> {
+    match &part.shape {
+        PartShape::Primitives(prims) => prims
+            .iter()
+            .map(|p| {
+                let (lo, hi) = p.bounds();
+                (hi - lo).min() / part.kappa()
+            })
+            .min_by(f64::total_cmp),
+        _ => None,
+    }
 }
 
 /// Parts per batch of [`evaluate_shape_prior`] (bounds the ground-truth grids in memory).
@@ -902,6 +939,7 @@ pub fn evaluate_shape_prior(
                     _ => None,
                 },
                 thinnest: 2.0 * part.half_extents.min() / part.kappa(),
+                thinnest_primitive: thinnest_primitive(part),
             });
         }
         progress(per_part.len(), refs.len());
@@ -1270,6 +1308,18 @@ fn l1_upstream(pred: f32, target: f32, truncation: Option<f32>) -> (f32, f32) {
     (r.abs(), sign)
 }
 
+/// One query's wrong-side term w · relu(−pred · sign target) and its derivative in `pred`:
+/// (w·|pred|, w·sign pred) where pred and target have opposite signs, else (0, 0) (a target
+/// of 0 has no side). Its gradient points where the L1 term's does, so on a wrong-side query
+/// the two add up to 1 + w.
+fn wrong_side(pred: f32, target: f32, w: f32) -> (f32, f32) {
+    if (target < 0.0 && pred > 0.0) || (target > 0.0 && pred < 0.0) {
+        (w * pred.abs(), w * pred.signum())
+    } else {
+        (0.0, 0.0)
+    }
+}
+
 /// The linear layers of `decoder` in the order of `WeightGrads::layers`
 /// ([`HostDecoder::weight_grads`]).
 fn decoder_linears(decoder: &ShapeDecoder) -> Vec<&Linear> {
@@ -1373,7 +1423,8 @@ fn eikonal_term(
 /// ```
 ///
 /// whose gradient with respect to every decoder weight, W_c, b_c and (through z) the encoder
-/// is the L1 term's. Returns (S, the L1 term's value).
+/// is the L1 term's (with the wrong-side and eikonal terms when they are on). Returns (S, the
+/// value of those terms).
 fn host_decoder_surrogate(
     decoder: &ShapeDecoder,
     z: Tensor<2>,
@@ -1391,6 +1442,7 @@ fn host_decoder_surrogate(
     let mut idx: Vec<usize> = (0..q.len()).map(|r| r / queries_per_part).collect();
     let n = q.len() as f32;
     let rows = q.len();
+    let ws = cfg.wrong_side as f32;
     let eik = (cfg.eikonal > 0.0).then(|| {
         let (offset, per_part) = cfg.eikonal_rows();
         let chosen: Vec<usize> = (0..rows / queries_per_part)
@@ -1416,7 +1468,7 @@ fn host_decoder_surrogate(
     }
     let g = host.weight_grads(&q, &feature_values, &idx, &|r, f| {
         if r < rows {
-            l1_upstream(f, tgt[r], cfg.truncation).1 / n
+            (l1_upstream(f, tgt[r], cfg.truncation).1 + wrong_side(f, tgt[r], ws).1) / n
                 + eik.as_ref().map_or(0.0, |e| e.base_upstream[r])
         } else {
             eik.as_ref().map_or(0.0, |e| e.probe_upstream[r - rows])
@@ -1425,7 +1477,7 @@ fn host_decoder_surrogate(
     let l1 = g.values[..rows]
         .iter()
         .zip(tgt)
-        .map(|(&f, &t)| l1_upstream(f, t, cfg.truncation).0 as f64)
+        .map(|(&f, &t)| (l1_upstream(f, t, cfg.truncation).0 + wrong_side(f, t, ws).0) as f64)
         .sum::<f64>()
         / rows.max(1) as f64
         + eik.as_ref().map_or(0.0, |e| e.value);
@@ -1445,10 +1497,10 @@ fn host_decoder_surrogate(
     (surrogate, l1)
 }
 
-/// A step's loss L = mean |f̂ − f| + w_reg · mean(z²) on `batch`: (a tensor whose gradient
-/// is ∂L, L's value). With [`DecoderBackward::Burn`] the tensor is L itself; with
-/// [`DecoderBackward::Host`] it is the surrogate of [`host_decoder_surrogate`] plus the
-/// regulariser.
+/// A step's loss L = mean |f̂ − f| + w_reg · mean(z²) (+ the wrong-side and eikonal terms when
+/// on) on `batch`: (a tensor whose gradient is ∂L, L's value). With [`DecoderBackward::Burn`]
+/// the tensor is L itself; with [`DecoderBackward::Host`] it is the surrogate of
+/// [`host_decoder_surrogate`] plus the regulariser.
 fn batch_loss(
     model: &ShapePrior,
     batch: Batch,
@@ -1465,11 +1517,18 @@ fn batch_loss(
             let pts = Tensor::from_data(TensorData::new(batch.pts, [b, q, 3]), device);
             let tgt = Tensor::from_data(TensorData::new(batch.tgt, [b, q]), device);
             let pred = model.decoder.sdf(pts.clone(), z.clone());
+            let side = (cfg.wrong_side > 0.0).then(|| {
+                let wrong = burn::tensor::activation::relu(-(pred.clone() * tgt.clone().sign()));
+                wrong.mean().mul_scalar(cfg.wrong_side)
+            });
             let diff = match cfg.truncation {
                 Some(d) => truncated_residual(pred, tgt, d),
                 None => pred - tgt,
             };
             let mut loss = diff.abs().mean() + reg;
+            if let Some(side) = side {
+                loss = loss + side;
+            }
             if cfg.eikonal > 0.0 {
                 // The reference form of `eikonal_term`, through burn's autodiff.
                 let (offset, per_part) = cfg.eikonal_rows();
@@ -2557,24 +2616,34 @@ mod tests {
             ..ShapeTrainConfig::default()
         };
         assert!(cfg.validate().unwrap_err().to_string().contains("lr"));
-        let cfg = ShapeTrainConfig {
-            eikonal: -0.5,
-            ..ShapeTrainConfig::default()
-        };
-        let e = cfg.validate().unwrap_err().to_string();
-        assert!(
-            e.contains("eikonal") && e.contains("between 0 and 100") && e.contains("-0.5"),
-            "{e}"
-        );
-        let cfg = ShapeTrainConfig {
-            batch_shards: 17,
-            ..ShapeTrainConfig::default()
-        };
-        let e = cfg.validate().unwrap_err().to_string();
-        assert!(
-            e.contains("batch_shards") && e.contains("between 1 and 16") && e.contains("17"),
-            "{e}"
-        );
+        // Field, limit and value in each message.
+        let d = ShapeTrainConfig::default;
+        for (cfg, want) in [
+            (
+                ShapeTrainConfig {
+                    eikonal: -0.5,
+                    ..d()
+                },
+                ["eikonal", "between 0 and 100", "-0.5"],
+            ),
+            (
+                ShapeTrainConfig {
+                    wrong_side: 101.0,
+                    ..d()
+                },
+                ["wrong_side", "between 0 and 100", "101"],
+            ),
+            (
+                ShapeTrainConfig {
+                    batch_shards: 17,
+                    ..d()
+                },
+                ["batch_shards", "between 1 and 16", "17"],
+            ),
+        ] {
+            let e = cfg.validate().unwrap_err().to_string();
+            assert!(want.iter().all(|w| e.contains(w)), "{e}");
+        }
         // The host backward pass is CPU code: a GPU run must take burn's.
         let cfg = ShapeTrainConfig {
             compute: Compute::Gpu(Some(0)),
@@ -2611,6 +2680,47 @@ mod tests {
         assert!(e.contains("part0_uniform.npy"), "{e}");
     }
 
+    /// `eval shape` groups parts by their thinnest primitive: a shell's wall is its smallest
+    /// extent over κ, whatever the primitive's kind; parts without primitives have none.
+    #[test]
+    fn thinnest_primitive_is_the_thinnest_wall_over_kappa() {
+        use crate::shape::{Axis, Primitive};
+        let b = Vector3::new(0.3, 0.2, 0.25);
+        let mut part = Part {
+            name: "body".into(),
+            half_extents: b,
+            center: Vector3::zeros(),
+            shape: PartShape::Primitives(vec![
+                Primitive::Cuboid {
+                    center: Vector3::new(0.29, 0.0, 0.0),
+                    half_extents: Vector3::new(0.01, 0.2, 0.25),
+                },
+                Primitive::Cylinder {
+                    center: Vector3::zeros(),
+                    axis: Axis::Z,
+                    radius: 0.05,
+                    half_height: 0.25,
+                },
+            ]),
+        };
+        let kappa = 2.0 * b.norm();
+        let t = thinnest_primitive(&part).unwrap();
+        assert!((t - 0.02 / kappa).abs() < 1e-12, "{t}");
+        // A thinner cylinder (diameter 0.01) becomes the thinnest.
+        if let PartShape::Primitives(p) = &mut part.shape {
+            p.push(Primitive::Cylinder {
+                center: Vector3::zeros(),
+                axis: Axis::X,
+                radius: 0.005,
+                half_height: 0.1,
+            });
+        }
+        let t = thinnest_primitive(&part).unwrap();
+        assert!((t - 0.01 / kappa).abs() < 1e-12, "{t}");
+        part.shape = PartShape::Box;
+        assert_eq!(thinnest_primitive(&part), None);
+    }
+
     #[test]
     fn truncated_residual_keeps_wrong_side_gradients() {
         let d = cpu();
@@ -2645,13 +2755,15 @@ mod tests {
                 })
             }
         }
-        for (seed, pe_freqs, blocks, truncation, code_every_block, eikonal) in [
-            (1, 4, 2, None, false, 0.0),
-            (2, 0, 1, Some(0.05), false, 0.0),
-            (3, 6, 0, None, false, 0.0),
-            (4, 4, 3, None, true, 0.0),
-            (5, 4, 2, None, false, 0.7),
-            (6, 6, 1, Some(0.05), true, 2.0),
+        for (seed, pe_freqs, blocks, truncation, code_every_block, eikonal, wrong_side) in [
+            (1, 4, 2, None, false, 0.0, 0.0),
+            (2, 0, 1, Some(0.05), false, 0.0, 0.0),
+            (3, 6, 0, None, false, 0.0, 0.0),
+            (4, 4, 3, None, true, 0.0, 0.0),
+            (5, 4, 2, None, false, 0.7, 0.0),
+            (6, 6, 1, Some(0.05), true, 2.0, 0.0),
+            (7, 4, 2, None, false, 0.0, 3.0),
+            (8, 6, 1, Some(0.05), false, 0.7, 1.5),
         ] {
             let cfg = ShapeTrainConfig {
                 model: ShapePriorConfig {
@@ -2667,6 +2779,7 @@ mod tests {
                 surface_points: 40,
                 truncation,
                 eikonal,
+                wrong_side,
                 w_reg: 0.01,
                 ..ShapeTrainConfig::default()
             };
@@ -2719,17 +2832,30 @@ mod tests {
             };
             let (host_value, host) = run(DecoderBackward::Host);
             let (burn_value, burn) = run(DecoderBackward::Burn);
-            if eikonal > 0.0 {
-                // The term is there: the same batch without it has a different loss.
-                let plain = ShapeTrainConfig {
-                    eikonal: 0.0,
-                    ..cfg.clone()
-                };
-                let (_, without) = batch_loss(&model, batch(), &plain, &device);
-                assert!(
-                    (host_value - without).abs() > 1e-3,
-                    "seed {seed}: eikonal {eikonal} left the loss at {without}"
-                );
+            // Each extra term is there: the same batch without it has a different loss.
+            for (on, plain) in [
+                (
+                    eikonal > 0.0,
+                    ShapeTrainConfig {
+                        eikonal: 0.0,
+                        ..cfg.clone()
+                    },
+                ),
+                (
+                    wrong_side > 0.0,
+                    ShapeTrainConfig {
+                        wrong_side: 0.0,
+                        ..cfg.clone()
+                    },
+                ),
+            ] {
+                if on {
+                    let (_, without) = batch_loss(&model, batch(), &plain, &device);
+                    assert!(
+                        (host_value - without).abs() > 1e-3,
+                        "seed {seed}: the term left the loss at {without}"
+                    );
+                }
             }
             assert!(
                 (host_value - burn_value).abs() <= 1e-5 * burn_value.abs().max(1.0),

@@ -1829,9 +1829,9 @@ fn read_checkpoint(out: &Path, cfg: &ShapeTrainConfig) -> Result<Checkpoint, Tra
     }
     let ours = cfg.to_json();
     for field in RESUME_FIELDS {
-        // Checkpoints from before the EMA existed ran without one.
+        // Checkpoints from before the EMA (or the wrong-side term) existed ran without one.
         let theirs = match &v["config"][field] {
-            Value::Null if field == "ema_decay" => json!(0.0),
+            Value::Null if field == "ema_decay" || field == "wrong_side" => json!(0.0),
             Value::Null if field == "freeze_encoder" => json!(false),
             x => x.clone(),
         };
@@ -2374,6 +2374,19 @@ mod tests {
             "{err}"
         );
 
+        // A checkpoint written before the wrong-side term existed has no such field: it ran
+        // without the term and resumes as such.
+        let ckpt = out.join(CHECKPOINT_FILE);
+        let mut doc: Value =
+            serde_json::from_str(&std::fs::read_to_string(&ckpt).unwrap()).unwrap();
+        assert!(
+            doc["config"]
+                .as_object_mut()
+                .unwrap()
+                .remove("wrong_side")
+                .is_some()
+        );
+        std::fs::write(&ckpt, doc.to_string()).unwrap();
         let resumed = ShapeTrainConfig {
             resume: true,
             ..cfg.clone()

@@ -243,7 +243,7 @@ struct EvalGenerativeArgs {
 #[derive(Subcommand, Debug)]
 enum TrainCommand {
     /// Train the part-shape auto-encoder on an imported data set; writes weights + codebook.
-    Shape(ShapeArgs),
+    Shape(Box<ShapeArgs>),
     /// Train the articulation denoiser; writes denoiser weights, the shape prior, the retrieval
     /// codebook and manifest.json.
     Diffusion(DiffusionArgs),
@@ -967,7 +967,7 @@ fn run(command: Command) -> anyhow::Result<()> {
         Command::Export(a) => export(a),
         Command::Render(a) => render(a),
         Command::Train { command } => match command {
-            TrainCommand::Shape(a) => model_cmd::shape(a),
+            TrainCommand::Shape(a) => model_cmd::shape(*a),
             TrainCommand::Diffusion(a) => model_cmd::diffusion(a),
             TrainCommand::Codebook(a) => model_cmd::codebook(a),
             TrainCommand::Encode(a) => model_cmd::encode(a),

@@ -2,13 +2,13 @@
 # A third decoder cycle on the shipped weights, with and without the wrong-side term
 # (train shape --wrong-side W), then eval shape on each (64 val parts, 64³), and the shipped
 # decoder for reference. Usage: bash docs/eval/wrong_side/run.sh BIN DATA WORK [W...]
-# (default W: 0 3). Each cycle: 3,000 steps, the recipe's cycle batch and settings (lr 5e-4,
+# (default W: 0 3 10). Each cycle: 3,000 steps, the recipe's cycle batch and settings (lr 5e-4,
 # eikonal 0.03, frozen encoder, two slices), seed 2 (cycles 1 and 2 of the recipe used 0, 1).
 set -euo pipefail
 BIN=$1 DATA=$2 WORK=$3
 shift 3
 weights=("$@")
-[ "${#weights[@]}" = 0 ] && weights=(0 3)
+[ "${#weights[@]}" = 0 ] && weights=(0 3 10)
 mkdir -p "$WORK"
 "$BIN" eval shape --weights weights --data "$DATA" --parts 64 --out "$WORK/shipped_val64.json"
 for w in "${weights[@]}"; do

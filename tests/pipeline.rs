@@ -386,23 +386,28 @@ fn synth_import_train_generate() {
         );
     }
 
-    // `eval shape` reports the shape prior's IoU per part and overall.
+    // `eval shape` reports the shape prior's IoU per part and overall. `shape_eval`: the
+    // weights' prior with `extra`; `small`: on 3 val parts at 16³.
+    let shape_eval = |extra: &[&str]| {
+        let mut args = vec![
+            "eval",
+            "shape",
+            "--weights",
+            s(&weights),
+            "--data",
+            s(&data),
+        ];
+        args.extend_from_slice(extra);
+        physnap(&args)
+    };
+    let small =
+        |extra: &[&str]| shape_eval(&[&["--parts", "3", "--resolution", "16"], extra].concat());
+    let succeeds = |o: Output| {
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
     let report = root.path().join("shape_eval.json");
-    let out = ok(&[
-        "eval",
-        "shape",
-        "--weights",
-        s(&weights),
-        "--data",
-        s(&data),
-        "--parts",
-        "3",
-        "--resolution",
-        "16",
-        "--out",
-        s(&report),
-        "--write-manifest",
-    ]);
+    let out = succeeds(small(&["--out", s(&report), "--write-manifest"]));
     assert!(out.contains("mean IoU"), "{out}");
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
@@ -442,88 +447,26 @@ fn synth_import_train_generate() {
     assert_eq!(m["metrics"]["shape"]["parts"], parts.len());
     // With fitted codes (decoder alone) the report says so, and the manifest is refused.
     let fitted = root.path().join("shape_fit.json");
-    let out = ok(&[
-        "eval",
-        "shape",
-        "--weights",
-        s(&weights),
-        "--data",
-        s(&data),
-        "--parts",
-        "3",
-        "--resolution",
-        "16",
-        "--fit-codes",
-        "5",
-        "--out",
-        s(&fitted),
-    ]);
+    let out = succeeds(small(&["--fit-codes", "5", "--out", s(&fitted)]));
     assert!(out.contains("codes fitted"), "{out}");
     let f: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&fitted).unwrap()).unwrap();
     assert_eq!(f["fit_codes"], 5);
     assert_eq!(f["parts"].as_array().unwrap().len(), parts.len());
-    let o = physnap(&[
-        "eval",
-        "shape",
-        "--weights",
-        s(&weights),
-        "--data",
-        s(&data),
-        "--fit-codes",
-        "5",
-        "--write-manifest",
-    ]);
+    let o = small(&["--fit-codes", "5", "--write-manifest"]);
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
         err.contains("--write-manifest") && err.contains("--fit-codes 5"),
         "{err}"
     );
-    // Another encoder input is measured and reported as such, never recorded; out of range is
-    // refused with the limit.
+    // Another encoder input is measured and reported as such (its refusals: below).
     let more = root.path().join("shape_more_points.json");
-    let shape_eval = |extra: &[&str]| {
-        let mut args = vec![
-            "eval",
-            "shape",
-            "--weights",
-            s(&weights),
-            "--data",
-            s(&data),
-            "--parts",
-            "3",
-            "--resolution",
-            "16",
-        ];
-        args.extend_from_slice(extra);
-        physnap(&args)
-    };
-    let o = shape_eval(&["--surface-points", "96", "--out", s(&more)]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    assert!(
-        String::from_utf8_lossy(&o.stdout).contains("encoder input: 96 surface points"),
-        "{}",
-        String::from_utf8_lossy(&o.stdout)
-    );
+    let out = succeeds(small(&["--surface-points", "96", "--out", s(&more)]));
+    assert!(out.contains("encoder input: 96 surface points"), "{out}");
     let more: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&more).unwrap()).unwrap();
     assert_eq!(more["surface_points"], 96);
-    for (flags, want) in [
-        (
-            &["--surface-points", "0"][..],
-            "invalid --surface-points 0: must be between 1 and 8192",
-        ),
-        (
-            &["--surface-points", "96", "--write-manifest"][..],
-            "--surface-points",
-        ),
-    ] {
-        let o = shape_eval(flags);
-        assert!(!o.status.success(), "{flags:?}");
-        let err = String::from_utf8_lossy(&o.stderr);
-        assert!(err.contains(want), "{flags:?}: {err}");
-    }
     // `eval generative` at toy scale: category accuracy searches the whole test split.
     let report = root.path().join("generative.json");
     let out = ok(&[
@@ -705,23 +648,26 @@ fn synth_import_train_generate() {
         e.contains("states") && e.contains("between 1 and 100"),
         "{e}"
     );
-    for (flag, value, expect) in [
-        ("--split", "holdout", "invalid --split \"holdout\""),
-        ("--parts", "0", "invalid --parts 0: must be between 1 and"),
+    // Out of range is refused with the limit; another encoder input is never recorded.
+    for (flags, expect) in [
+        (&["--split", "holdout"][..], "invalid --split \"holdout\""),
+        (
+            &["--parts", "0"][..],
+            "invalid --parts 0: must be between 1 and",
+        ),
+        (
+            &["--surface-points", "0"][..],
+            "invalid --surface-points 0: must be between 1 and 8192",
+        ),
+        (
+            &["--surface-points", "96", "--write-manifest"][..],
+            "--surface-points",
+        ),
     ] {
-        let o = physnap(&[
-            "eval",
-            "shape",
-            "--weights",
-            s(&weights),
-            "--data",
-            s(&data),
-            flag,
-            value,
-        ]);
-        assert!(!o.status.success());
+        let o = shape_eval(flags);
+        assert!(!o.status.success(), "{flags:?}");
         let e = String::from_utf8_lossy(&o.stderr);
-        assert!(e.contains(expect), "{e}");
+        assert!(e.contains(expect), "{flags:?}: {e}");
     }
 
     // Bad inputs are refused clearly.

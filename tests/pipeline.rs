@@ -33,6 +33,20 @@ fn diffusion_runs_with(err: &str, flag: &str) -> usize {
         .count()
 }
 
+/// `eval shape` on the prior of `weights` with `extra`.
+fn shape_args(weights: &Path, data: &Path, extra: &[&str]) -> Vec<String> {
+    ["eval", "shape", "--weights", s(weights), "--data", s(data)]
+        .iter()
+        .chain(extra)
+        .map(|a| a.to_string())
+        .collect()
+}
+
+/// The `&str`s of `args`, as `physnap` and `ok` take them.
+fn strs(args: &[String]) -> Vec<&str> {
+    args.iter().map(String::as_str).collect()
+}
+
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
@@ -386,28 +400,17 @@ fn synth_import_train_generate() {
         );
     }
 
-    // `eval shape` reports the shape prior's IoU per part and overall. `shape_eval`: the
-    // weights' prior with `extra`; `small`: on 3 val parts at 16³.
-    let shape_eval = |extra: &[&str]| {
-        let mut args = vec![
-            "eval",
-            "shape",
-            "--weights",
-            s(&weights),
-            "--data",
-            s(&data),
-        ];
-        args.extend_from_slice(extra);
-        physnap(&args)
-    };
-    let small =
-        |extra: &[&str]| shape_eval(&[&["--parts", "3", "--resolution", "16"], extra].concat());
-    let succeeds = |o: Output| {
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        String::from_utf8_lossy(&o.stdout).into_owned()
+    // `eval shape` reports the shape prior's IoU per part and overall. `small`: on 3 val parts
+    // at 16³.
+    let small = |extra: &[&str]| -> Vec<String> {
+        shape_args(
+            &weights,
+            &data,
+            &[&["--parts", "3", "--resolution", "16"], extra].concat(),
+        )
     };
     let report = root.path().join("shape_eval.json");
-    let out = succeeds(small(&["--out", s(&report), "--write-manifest"]));
+    let out = ok(&strs(&small(&["--out", s(&report), "--write-manifest"])));
     assert!(out.contains("mean IoU"), "{out}");
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
@@ -447,13 +450,13 @@ fn synth_import_train_generate() {
     assert_eq!(m["metrics"]["shape"]["parts"], parts.len());
     // With fitted codes (decoder alone) the report says so, and the manifest is refused.
     let fitted = root.path().join("shape_fit.json");
-    let out = succeeds(small(&["--fit-codes", "5", "--out", s(&fitted)]));
+    let out = ok(&strs(&small(&["--fit-codes", "5", "--out", s(&fitted)])));
     assert!(out.contains("codes fitted"), "{out}");
     let f: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&fitted).unwrap()).unwrap();
     assert_eq!(f["fit_codes"], 5);
     assert_eq!(f["parts"].as_array().unwrap().len(), parts.len());
-    let o = small(&["--fit-codes", "5", "--write-manifest"]);
+    let o = physnap(&strs(&small(&["--fit-codes", "5", "--write-manifest"])));
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
@@ -462,7 +465,12 @@ fn synth_import_train_generate() {
     );
     // Another encoder input is measured and reported as such (its refusals: below).
     let more = root.path().join("shape_more_points.json");
-    let out = succeeds(small(&["--surface-points", "96", "--out", s(&more)]));
+    let out = ok(&strs(&small(&[
+        "--surface-points",
+        "96",
+        "--out",
+        s(&more),
+    ])));
     assert!(out.contains("encoder input: 96 surface points"), "{out}");
     let more: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&more).unwrap()).unwrap();
@@ -664,7 +672,7 @@ fn synth_import_train_generate() {
             "--surface-points",
         ),
     ] {
-        let o = shape_eval(flags);
+        let o = physnap(&strs(&shape_args(&weights, &data, flags)));
         assert!(!o.status.success(), "{flags:?}");
         let e = String::from_utf8_lossy(&o.stderr);
         assert!(e.contains(expect), "{flags:?}: {e}");

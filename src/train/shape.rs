@@ -1828,11 +1828,12 @@ fn read_checkpoint(out: &Path, cfg: &ShapeTrainConfig) -> Result<Checkpoint, Tra
         ));
     }
     let ours = cfg.to_json();
+    let defaults = ShapeTrainConfig::default().to_json();
     for field in RESUME_FIELDS {
-        // Checkpoints from before the EMA (or the wrong-side term) existed ran without one.
+        // A field newer than the checkpoint (the EMA, the frozen encoder, the wrong-side term)
+        // is missing from it: that run had the option off, which is its default.
         let theirs = match &v["config"][field] {
-            Value::Null if field == "ema_decay" || field == "wrong_side" => json!(0.0),
-            Value::Null if field == "freeze_encoder" => json!(false),
+            Value::Null => defaults[field].clone(),
             x => x.clone(),
         };
         if theirs != ours[field] {

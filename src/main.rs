@@ -364,7 +364,9 @@ struct ShapeArgs {
     /// Point encoder residual blocks (default 4; NAP: 5).
     #[arg(long, env = "PHYSNAP_SHAPE_ENCODER_BLOCKS")]
     encoder_blocks: Option<usize>,
-    /// Positional-encoding octaves of the query (default 8, as NAP).
+    /// Positional-encoding octaves of the query (default 8, as NAP). With --init-from weights
+    /// of fewer octaves, the decoder is widened: the new octaves start at zero weight, so
+    /// training starts from the same SDF and codes.
     #[arg(long, env = "PHYSNAP_SHAPE_PE_FREQS")]
     pe_freqs: Option<usize>,
     /// Add the code to every residual block's input of the SDF decoder (ConvONet's decoder),

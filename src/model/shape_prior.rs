@@ -267,6 +267,39 @@ impl ShapeDecoder {
         self.sdf_with_features(points, self.code_features(codes))
     }
 
+    /// The same decoder with `pe_freqs` octaves (≥ its own): the weights of γ(q)'s existing
+    /// channels move to their places in the wider encoding, the new octaves' rows of W_p are
+    /// zero. The SDF is unchanged (exactly: the new channels are multiplied by zero) until
+    /// training moves those rows, so a trained decoder can gain finer frequencies while its
+    /// codes, and every model trained on them, stay valid. Panics when `pe_freqs` is smaller.
+    pub fn widen_positional_encoding(self, pe_freqs: usize) -> Self {
+        let old = self.pe_freqs;
+        assert!(pe_freqs >= old, "cannot narrow N_pe {old} to {pe_freqs}");
+        let device = self.fc_p.weight.device();
+        let h = self.hidden();
+        let w = (self.fc_p.weight.val().into_data().try_into_vec::<f32>()).expect("f32 weights");
+        let row = |n: usize, block: usize, axis: usize, f: usize| 3 + block * 3 * n + axis * n + f;
+        let mut wide = vec![0.0f32; (3 + 6 * pe_freqs) * h];
+        wide[..3 * h].copy_from_slice(&w[..3 * h]);
+        for block in 0..2 {
+            for axis in 0..3 {
+                for f in 0..old {
+                    let (from, to) = (row(old, block, axis, f), row(pe_freqs, block, axis, f));
+                    wide[to * h..(to + 1) * h].copy_from_slice(&w[from * h..(from + 1) * h]);
+                }
+            }
+        }
+        let fc_p = Linear {
+            weight: Param::from_data(TensorData::new(wide, [3 + 6 * pe_freqs, h]), &device),
+            bias: self.fc_p.bias,
+        };
+        ShapeDecoder {
+            fc_p,
+            pe_freqs,
+            ..self
+        }
+    }
+
     /// Hidden width.
     pub fn hidden(&self) -> usize {
         self.fc_p.weight.shape().dims::<2>()[1]
@@ -470,6 +503,44 @@ pub(crate) mod tests {
             6_628_480
         );
         assert_eq!(cfg.pe_dim(), 51);
+    }
+
+    /// Widening N_pe keeps the SDF (the new octaves' rows are zero) and makes a decoder of
+    /// the wider config.
+    #[test]
+    fn widening_the_positional_encoding_keeps_the_sdf() {
+        let device = cpu();
+        let cfg = tiny();
+        let mut rng = Rng::new(3);
+        let mut decoder = ShapeDecoder::new(&cfg, &mut rng, &device);
+        // Give the zero-initialised second weights values so every block matters.
+        for b in &mut decoder.blocks {
+            let shape = b.fc_1.weight.shape().dims::<2>();
+            let w: Vec<f32> = (0..shape[0] * shape[1])
+                .map(|_| rng.gauss() as f32 * 0.3)
+                .collect();
+            b.fc_1.weight = Param::from_data(TensorData::new(w, shape), &device);
+        }
+        let pts: Vec<f32> = (0..3 * 40).map(|_| rng.range(-0.5, 0.5) as f32).collect();
+        let codes: Vec<f32> = (0..2 * cfg.latent).map(|_| rng.gauss() as f32).collect();
+        let run = |d: &ShapeDecoder| {
+            let p = Tensor::<3>::from_data(TensorData::new(pts.clone(), [2, 20, 3]), &device);
+            let c =
+                Tensor::<2>::from_data(TensorData::new(codes.clone(), [2, cfg.latent]), &device);
+            to_vec(d.sdf(p, c))
+        };
+        let before = run(&decoder);
+        let wide = decoder.widen_positional_encoding(11);
+        assert_eq!(wide.pe_freqs, 11);
+        assert_eq!(wide.fc_p.weight.shape().dims::<2>(), [3 + 6 * 11, 16]);
+        let after = run(&wide);
+        for (a, b) in before.iter().zip(&after) {
+            assert!((a - b).abs() <= 1e-5 * (1.0 + a.abs()), "{a} vs {b}");
+        }
+        assert!(
+            before.iter().any(|v| v.abs() > 1e-3),
+            "a trivial decoder tests nothing"
+        );
     }
 
     #[test]

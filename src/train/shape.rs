@@ -160,8 +160,9 @@ pub struct ShapeTrainConfig {
     pub stop_at: Option<usize>,
     /// Where the optimiser steps run (evaluation, saving and the codebook run on the CPU).
     pub compute: Compute,
-    /// Start from these weights (a `shape_prior.safetensors` of the same sizes) instead of the
-    /// seeded initialisation: continued training, a second cosine cycle.
+    /// Start from these weights (a `shape_prior.safetensors` of the same sizes, or of fewer
+    /// positional-encoding octaves, which [`ShapeDecoder::widen_positional_encoding`] widens)
+    /// instead of the seeded initialisation: continued training, a second cosine cycle.
     pub init_from: Option<PathBuf>,
     /// Keep the encoder's weights fixed (needs `init_from`): only the decoder trains, so every
     /// part's code, and with it a denoiser trained on those codes, stays valid.
@@ -1043,6 +1044,63 @@ pub fn load_shape_prior(
     Ok(model)
 }
 
+/// Positional-encoding octaves of the decoder stored in the safetensors file `path`, from the
+/// shape of `decoder.fc_p.weight` in its header ([3 + 6 N_pe, hidden]).
+fn stored_pe_freqs(path: &Path) -> Result<usize, TrainError> {
+    use std::io::Read;
+    let bad = |detail: String| TrainError::data(path, detail);
+    let mut file = std::fs::File::open(path).map_err(TrainError::io(path))?;
+    let mut len = [0u8; 8];
+    file.read_exact(&mut len).map_err(TrainError::io(path))?;
+    let len = u64::from_le_bytes(len);
+    if len > 1 << 24 {
+        return Err(bad(format!(
+            "safetensors header of {len} bytes (limit 16 MiB)"
+        )));
+    }
+    let mut header = vec![0u8; len as usize];
+    file.read_exact(&mut header).map_err(TrainError::io(path))?;
+    let header: Value = serde_json::from_slice(&header)
+        .map_err(|e| bad(format!("safetensors header is not JSON: {e}")))?;
+    let d_in = header["decoder.fc_p.weight"]["shape"][0]
+        .as_u64()
+        .ok_or_else(|| bad("no decoder.fc_p.weight in the safetensors header".into()))?;
+    match d_in.checked_sub(3) {
+        Some(d) if d % 6 == 0 => Ok((d / 6) as usize),
+        _ => Err(bad(format!(
+            "decoder.fc_p.weight has {d_in} input rows, not 3 + 6 N_pe"
+        ))),
+    }
+}
+
+/// `init_from`'s weights as a model of `cfg`. When the file's decoder has fewer
+/// positional-encoding octaves than `cfg.pe_freqs`, it is widened
+/// ([`ShapeDecoder::widen_positional_encoding`]): same SDF, room for finer detail.
+fn load_init(
+    path: &Path,
+    cfg: &ShapePriorConfig,
+    device: &Device,
+) -> Result<ShapePrior, TrainError> {
+    let stored = stored_pe_freqs(path)?;
+    if stored >= cfg.pe_freqs {
+        return load_shape_prior(path, cfg, device);
+    }
+    let narrow = ShapePriorConfig {
+        pe_freqs: stored,
+        ..*cfg
+    };
+    let model = load_shape_prior(path, &narrow, device)?;
+    tracing::info!(
+        from = stored,
+        to = cfg.pe_freqs,
+        "widening the decoder's positional encoding"
+    );
+    Ok(ShapePrior {
+        encoder: model.encoder,
+        decoder: model.decoder.widen_positional_encoding(cfg.pe_freqs),
+    })
+}
+
 /// The shape prior in a `train shape` output directory with its sizes and the document they
 /// came from: `shape_train.json` of a finished run, else `shape_checkpoint.json` of a run that
 /// stopped at a checkpoint (`--stop-at`, or killed), whose weights must match the sha256 it
@@ -1624,7 +1682,7 @@ impl<'a> Trainer<'a> {
     fn new(cfg: &'a ShapeTrainConfig, parts: &'a [PartSamples]) -> Result<Self, TrainError> {
         let device = cfg.compute.autodiff();
         let model = match &cfg.init_from {
-            Some(init) => load_shape_prior(init, &cfg.model, &device)?,
+            Some(init) => load_init(init, &cfg.model, &device)?,
             None => ShapePrior::with_seed(&cfg.model, cfg.seed, &device),
         };
         Ok(Trainer {
@@ -2276,6 +2334,32 @@ mod tests {
         // ... while the decoder moved, and without the freeze the encoder moves too.
         assert_ne!(read(&base, WEIGHTS_FILE), read(&frozen, WEIGHTS_FILE));
         assert_ne!(read(&base, CODEBOOK_FILE), read(&free, CODEBOOK_FILE));
+        // More positional-encoding octaves than the file's: the decoder is widened, the codes
+        // stay, and the run records its own N_pe; fewer than the file's is refused.
+        let with_pe = |out: &str, pe_freqs: usize| {
+            let cfg = ShapeTrainConfig {
+                init_from: Some(base.join(WEIGHTS_FILE)),
+                freeze_encoder: true,
+                model: ShapePriorConfig {
+                    pe_freqs,
+                    ..short.model
+                },
+                ..short.clone()
+            };
+            let out = data.path().join(out);
+            train_shape(&train, &cfg, &out, &mut |_| {}).map(|_| out)
+        };
+        let wide = with_pe("wide", short.model.pe_freqs + 2).unwrap();
+        assert_eq!(read(&base, CODEBOOK_FILE), read(&wide, CODEBOOK_FILE));
+        let (_, wide_cfg, _) = load_shape_dir(&wide, &cpu()).unwrap();
+        assert_eq!(wide_cfg.pe_freqs, short.model.pe_freqs + 2);
+        let e = with_pe("narrow", short.model.pe_freqs - 1)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(WEIGHTS_FILE) && e.contains("decoder.fc_p.weight"),
+            "{e}"
+        );
         // A config of other sizes is refused with the file's name.
         let cfg = ShapeTrainConfig {
             init_from: Some(base.join(WEIGHTS_FILE)),

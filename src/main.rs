@@ -255,7 +255,8 @@ enum TrainCommand {
     Encode(EncodeArgs),
     /// Install a `train shape --freeze-encoder` output into a weights directory: its decoder
     /// replaces the installed one while every code, and so the denoiser, stays valid (refused
-    /// when the encoder differs). Rewrites the manifest and the codebook and clears the
+    /// when the encoder differs). The decoder may be larger (`train shape --init-from` with a
+    /// larger `--pe-freqs`, `--decoder-hidden` or `--decoder-blocks` grows it), never smaller. Rewrites the manifest and the codebook and clears the
     /// metrics, which `eval generative --write-manifest` measures again.
     InstallShape(InstallShapeArgs),
 }
@@ -353,9 +354,12 @@ struct ShapeArgs {
     #[arg(long, env = "PHYSNAP_SHAPE_STOP_AT")]
     stop_at: Option<usize>,
     /// SDF decoder width (default 128; NAP: 256). The latent stays 128, the denoiser's F.
+    /// Above --init-from's, the decoder is grown function-preservingly (new channels unread
+    /// until they train), so the codes, and the denoiser trained on them, stay valid.
     #[arg(long, env = "PHYSNAP_SHAPE_DECODER_HIDDEN")]
     decoder_hidden: Option<usize>,
-    /// SDF decoder residual blocks (default 4; NAP: 5).
+    /// SDF decoder residual blocks (default 4; NAP: 5). Above --init-from's, new blocks start
+    /// as identities.
     #[arg(long, env = "PHYSNAP_SHAPE_DECODER_BLOCKS")]
     decoder_blocks: Option<usize>,
     /// Point encoder width (default 128; NAP: 512).
@@ -364,9 +368,9 @@ struct ShapeArgs {
     /// Point encoder residual blocks (default 4; NAP: 5).
     #[arg(long, env = "PHYSNAP_SHAPE_ENCODER_BLOCKS")]
     encoder_blocks: Option<usize>,
-    /// Positional-encoding octaves of the query (default 8, as NAP). With --init-from weights
-    /// of fewer octaves, the decoder is widened: the new octaves start at zero weight, so
-    /// training starts from the same SDF and codes.
+    /// Positional-encoding octaves of the query (default 8, as NAP). Above --init-from's, the
+    /// decoder is grown (as for --decoder-hidden and --decoder-blocks): training starts from
+    /// the same SDF and codes.
     #[arg(long, env = "PHYSNAP_SHAPE_PE_FREQS")]
     pe_freqs: Option<usize>,
     /// Add the code to every residual block's input of the SDF decoder (ConvONet's decoder),

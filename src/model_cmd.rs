@@ -182,16 +182,28 @@ pub fn install_shape(a: InstallShapeArgs) -> anyhow::Result<()> {
     )
     .with_context(|| format!("parsing {}", report_path.display()))?;
     let cfg = model_config_of(&report, &report_path)?;
-    if cfg != manifest.shape_prior.config {
+    let installed_cfg = manifest.shape_prior.config;
+    // A decoder grown by train shape --init-from (more octaves, wider, deeper) keeps the
+    // encoder and the code space: only those three sizes may differ, and only upwards.
+    let same_sizes = physnap::model::shape_prior::ShapePriorConfig {
+        pe_freqs: installed_cfg.pe_freqs,
+        decoder_hidden: installed_cfg.decoder_hidden,
+        decoder_blocks: installed_cfg.decoder_blocks,
+        ..cfg
+    };
+    if same_sizes != installed_cfg
+        || cfg.pe_freqs < installed_cfg.pe_freqs
+        || cfg.decoder_hidden < installed_cfg.decoder_hidden
+        || cfg.decoder_blocks < installed_cfg.decoder_blocks
+    {
         bail!(
-            "{}: model sizes {cfg:?} differ from the installed shape prior's {:?}",
+            "{}: model sizes {cfg:?} differ from the installed shape prior's {installed_cfg:?} (only pe_freqs, decoder_hidden and decoder_blocks may grow)",
             report_path.display(),
-            manifest.shape_prior.config
         );
     }
     let candidate = a.shape.join("shape_prior.safetensors");
     let device = physnap::model::cpu();
-    let old = load_shape_prior(&installed, &cfg, &device)?;
+    let old = load_shape_prior(&installed, &installed_cfg, &device)?;
     let new = load_shape_prior(&candidate, &cfg, &device)?;
     // Same encoder = same function: both encode the same 8 × 256 seeded points to the same
     // bits (weights that differ anywhere change the codes).
@@ -224,6 +236,7 @@ pub fn install_shape(a: InstallShapeArgs) -> anyhow::Result<()> {
         std::fs::read(&candidate).with_context(|| format!("reading {}", candidate.display()))?;
     write_atomic(&installed, &new_bytes)?;
     manifest.shape_prior.sha256 = sha256_hex(&new_bytes);
+    manifest.shape_prior.config = cfg;
     // Every run this one continued stays on record: `shape_base` is the prior trained from
     // scratch (its encoder made the codes), `shape_cycles` the decoder cycles installed since,
     // oldest first. The metrics were measured with the old decoder.

@@ -701,8 +701,9 @@ fn synth_import_train_generate() {
 
     // `train shape --init-from weights --freeze-encoder` trains the decoder on with every code
     // unchanged, and `train install-shape` puts it into the weights: new sha256, metrics
-    // cleared, the old report kept, and the weights still generate. A run whose encoder moved
-    // is refused.
+    // cleared, the old report kept, and the weights still generate. The frozen run widens the
+    // decoder's positional encoding (8 → 10 octaves), which the manifest then records. A run
+    // whose encoder moved is refused.
     let ft = root.path().join("ft");
     let moved = root.path().join("moved");
     for (out, freeze) in [(&ft, true), (&moved, false)] {
@@ -710,7 +711,7 @@ fn synth_import_train_generate() {
         args.extend(["--steps", "3", "--init-from", s(&weights)]);
         args.extend(sizes);
         if freeze {
-            args.push("--freeze-encoder");
+            args.extend(["--freeze-encoder", "--pe-freqs", "10"]);
         }
         ok(&args);
     }
@@ -753,6 +754,7 @@ fn synth_import_train_generate() {
         physnap::model::weights::sha256_hex(&installed)
     );
     assert!(m["metrics"].is_null(), "{m:#}");
+    assert_eq!(m["shape_prior"]["config"]["pe_freqs"], 10);
     assert_eq!(m["training"]["shape"]["config"]["freeze_encoder"], true);
     assert_eq!(m["training"]["shape_base"]["steps"], 6);
     // The first cycle installed: no earlier cycle to list.

@@ -267,37 +267,150 @@ impl ShapeDecoder {
         self.sdf_with_features(points, self.code_features(codes))
     }
 
-    /// The same decoder with `pe_freqs` octaves (≥ its own): the weights of γ(q)'s existing
-    /// channels move to their places in the wider encoding, the new octaves' rows of W_p are
-    /// zero. The SDF is unchanged (exactly: the new channels are multiplied by zero) until
-    /// training moves those rows, so a trained decoder can gain finer frequencies while its
-    /// codes, and every model trained on them, stay valid. Panics when `pe_freqs` is smaller.
-    pub fn widen_positional_encoding(self, pe_freqs: usize) -> Self {
-        let old = self.pe_freqs;
-        assert!(pe_freqs >= old, "cannot narrow N_pe {old} to {pe_freqs}");
-        let device = self.fc_p.weight.device();
+    /// The same function in a larger decoder of `cfg`'s sizes (each ≥ its own; the code
+    /// width and `code_every_block` must match): more positional-encoding octaves, a wider
+    /// hidden width, more residual blocks. Function-preserving growth (Net2Net-style):
+    /// - γ(q)'s existing channels keep their rows of W_p at their new places; the new
+    ///   octaves' rows are zero into the old hidden channels;
+    /// - a new hidden channel of the residual stream carries a fresh random feature of γ(q)
+    ///   (its W_p column and bias), but nothing reads it yet: its rows of every block's first
+    ///   layer and of the output layer are zero. (A channel held at zero instead would never
+    ///   learn: the blocks' leading ReLU has no gradient at 0.)
+    /// - a block's new inner units read the old channels through fresh random weights and
+    ///   write nothing yet (their rows of the block's second layer are zero);
+    /// - new blocks are identities (second layer weight and bias zero).
+    ///
+    /// Fresh values come from `rng` with PyTorch's bound 1/√fan_in. The SDF is unchanged up
+    /// to float rounding until training moves the new weights, so a trained decoder gains room
+    /// while its codes, and every model trained on them, stay valid. Refuses, with the field,
+    /// limit and value, a size that would shrink or change.
+    pub fn grow(self, cfg: &ShapePriorConfig, rng: &mut Rng) -> Result<Self, ModelError> {
         let h = self.hidden();
-        let w = (self.fc_p.weight.val().into_data().try_into_vec::<f32>()).expect("f32 weights");
-        let row = |n: usize, block: usize, axis: usize, f: usize| 3 + block * 3 * n + axis * n + f;
-        let mut wide = vec![0.0f32; (3 + 6 * pe_freqs) * h];
-        wide[..3 * h].copy_from_slice(&w[..3 * h]);
-        for block in 0..2 {
-            for axis in 0..3 {
-                for f in 0..old {
-                    let (from, to) = (row(old, block, axis, f), row(pe_freqs, block, axis, f));
-                    wide[to * h..(to + 1) * h].copy_from_slice(&w[from * h..(from + 1) * h]);
-                }
+        let (blocks, rows, f) = (self.blocks.len(), self.feature_width() / h, self.latent());
+        let refuse = |field: &str, limit: String, value: usize| {
+            Err(ModelError::Config {
+                field: field.into(),
+                limit,
+                value: value.to_string(),
+            })
+        };
+        for (field, want, have) in [
+            ("pe_freqs", cfg.pe_freqs, self.pe_freqs),
+            ("decoder_hidden", cfg.decoder_hidden, h),
+            ("decoder_blocks", cfg.decoder_blocks, blocks),
+        ] {
+            if want < have {
+                return refuse(field, format!("at least the grown decoder's {have}"), want);
             }
         }
-        let fc_p = Linear {
-            weight: Param::from_data(TensorData::new(wide, [3 + 6 * pe_freqs, h]), &device),
-            bias: self.fc_p.bias,
-        };
-        ShapeDecoder {
-            fc_p,
-            pe_freqs,
-            ..self
+        if cfg.latent != f {
+            return refuse("latent", format!("the grown decoder's {f}"), cfg.latent);
         }
+        if cfg.code_rows() != rows {
+            return refuse(
+                "code_every_block",
+                format!("{rows} code rows"),
+                cfg.code_rows(),
+            );
+        }
+        let device = self.fc_p.weight.device();
+        let hh = cfg.decoder_hidden;
+        let (n_old, n_new) = (self.pe_freqs, cfg.pe_freqs);
+        let pe_new = 3 + 6 * n_new;
+        // γ(q) = [q, cos block, sin block], each block coordinate-major: the new index of old
+        // channel i (octave f of axis a in block k).
+        let pe_row = |i: usize| {
+            if i < 3 {
+                return i;
+            }
+            let (k, rest) = ((i - 3) / (3 * n_old), (i - 3) % (3 * n_old));
+            3 + k * 3 * n_new + (rest / n_old) * n_new + rest % n_old
+        };
+        let same = |i: usize| i;
+        // Code row l's h columns move to l · hh.
+        let code_col = |j: usize| (j / h) * hh + j % h;
+        // A layer of shape [r_new, c_new] (+ bias [c_new]) holding `old`'s weights [r, c] at
+        // (row_at(i), col_at(j)) and its bias at col_at(j); every other entry from
+        // fill(row is old, column is old).
+        let mut grow_linear = |old: &Linear,
+                               (r_new, c_new): (usize, usize),
+                               row_at: &dyn Fn(usize) -> usize,
+                               col_at: &dyn Fn(usize) -> usize,
+                               fill: &dyn Fn(bool, bool) -> bool| {
+            let [r, c] = old.weight.shape().dims::<2>();
+            let w = old.weight.val().into_data().try_into_vec::<f32>();
+            let w = w.expect("f32 weights");
+            let (mut row_old, mut col_old) = (vec![false; r_new], vec![false; c_new]);
+            let mut placed = vec![None; r_new * c_new];
+            for i in 0..r {
+                row_old[row_at(i)] = true;
+                for j in 0..c {
+                    col_old[col_at(j)] = true;
+                    placed[row_at(i) * c_new + col_at(j)] = Some(w[i * c + j]);
+                }
+            }
+            let bound = 1.0 / (r_new as f64).sqrt();
+            let mut fresh = |random: bool| {
+                if random {
+                    rng.range(-bound, bound) as f32
+                } else {
+                    0.0
+                }
+            };
+            let w: Vec<f32> = (0..r_new * c_new)
+                .map(|k| {
+                    let (i, j) = (k / c_new, k % c_new);
+                    placed[k].unwrap_or_else(|| fresh(fill(row_old[i], col_old[j])))
+                })
+                .collect();
+            let bias = old.bias.as_ref().map(|b| {
+                let b = b.val().into_data().try_into_vec::<f32>();
+                let b = b.expect("f32 weights");
+                let mut out: Vec<Option<f32>> = vec![None; c_new];
+                for (j, v) in b.into_iter().enumerate() {
+                    out[col_at(j)] = Some(v);
+                }
+                let out: Vec<f32> = out
+                    .into_iter()
+                    .map(|v| v.unwrap_or_else(|| fresh(fill(true, false))))
+                    .collect();
+                Param::from_data(TensorData::new(out, [c_new]), &device)
+            });
+            Linear {
+                weight: Param::from_data(TensorData::new(w, [r_new, c_new]), &device),
+                bias,
+            }
+        };
+        // W_p: new channels random (new octaves too), old channels see no new octave.
+        let fc_p = grow_linear(&self.fc_p, (pe_new, hh), &pe_row, &same, &|_, col| !col);
+        // W_c: the code adds nothing to new channels yet.
+        let fc_c = grow_linear(&self.fc_c, (f, rows * hh), &same, &code_col, &|_, _| false);
+        let mut grown: Vec<ResBlock> = Vec::with_capacity(cfg.decoder_blocks);
+        for b in &self.blocks {
+            // First layer: new inner units read the old channels; new channels are read by
+            // nobody. Second layer: new inner units write nothing; new channels get nothing.
+            let fc_0 = grow_linear(&b.fc_0, (hh, hh), &same, &same, &|row, col| row && !col);
+            let fc_1 = grow_linear(&b.fc_1, (hh, hh), &same, &same, &|_, _| false);
+            grown.push(ResBlock {
+                fc_0,
+                fc_1,
+                shortcut: None,
+            });
+        }
+        let fc_out = grow_linear(&self.fc_out, (hh, 1), &same, &same, &|_, _| false);
+        for _ in blocks..cfg.decoder_blocks {
+            let mut block = ResBlock::new(hh, hh, rng, &device);
+            let zero = TensorData::new(vec![0.0f32; hh], [hh]);
+            block.fc_1.bias = Some(Param::from_data(zero, &device));
+            grown.push(block);
+        }
+        Ok(ShapeDecoder {
+            fc_p,
+            fc_c,
+            blocks: grown,
+            fc_out,
+            pe_freqs: n_new,
+        })
     }
 
     /// Hidden width.
@@ -505,22 +618,15 @@ pub(crate) mod tests {
         assert_eq!(cfg.pe_dim(), 51);
     }
 
-    /// Widening N_pe keeps the SDF (the new octaves' rows are zero) and makes a decoder of
-    /// the wider config.
+    /// Growing the decoder (N_pe 8 → 11, hidden 16 → 24, 2 → 3 blocks) keeps the SDF, makes
+    /// a decoder of the larger config whose new weights get gradients, and refuses to shrink.
     #[test]
-    fn widening_the_positional_encoding_keeps_the_sdf() {
-        let device = cpu();
+    fn growing_the_decoder_keeps_the_sdf() {
+        let device = cpu_autodiff();
         let cfg = tiny();
         let mut rng = Rng::new(3);
-        let mut decoder = ShapeDecoder::new(&cfg, &mut rng, &device);
-        // Give the zero-initialised second weights values so every block matters.
-        for b in &mut decoder.blocks {
-            let shape = b.fc_1.weight.shape().dims::<2>();
-            let w: Vec<f32> = (0..shape[0] * shape[1])
-                .map(|_| rng.gauss() as f32 * 0.3)
-                .collect();
-            b.fc_1.weight = Param::from_data(TensorData::new(w, shape), &device);
-        }
+        // Random second-layer weights too (fresh ones are zero), so every block matters.
+        let decoder = randomised(ShapeDecoder::new(&cfg, &mut rng, &device), 9);
         let pts: Vec<f32> = (0..3 * 40).map(|_| rng.range(-0.5, 0.5) as f32).collect();
         let codes: Vec<f32> = (0..2 * cfg.latent).map(|_| rng.gauss() as f32).collect();
         let run = |d: &ShapeDecoder| {
@@ -530,10 +636,43 @@ pub(crate) mod tests {
             to_vec(d.sdf(p, c))
         };
         let before = run(&decoder);
-        let wide = decoder.widen_positional_encoding(11);
-        assert_eq!(wide.pe_freqs, 11);
-        assert_eq!(wide.fc_p.weight.shape().dims::<2>(), [3 + 6 * 11, 16]);
-        let after = run(&wide);
+        let big = ShapePriorConfig {
+            pe_freqs: 11,
+            decoder_hidden: 24,
+            decoder_blocks: 3,
+            ..cfg
+        };
+        for (field, smaller) in [
+            ("pe_freqs", ShapePriorConfig { pe_freqs: 7, ..cfg }),
+            (
+                "decoder_hidden",
+                ShapePriorConfig {
+                    decoder_hidden: 8,
+                    ..cfg
+                },
+            ),
+            (
+                "decoder_blocks",
+                ShapePriorConfig {
+                    decoder_blocks: 1,
+                    ..cfg
+                },
+            ),
+            ("latent", ShapePriorConfig { latent: 9, ..cfg }),
+        ] {
+            let e = decoder
+                .clone()
+                .grow(&smaller, &mut rng)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(field), "{e}");
+        }
+        let grown = decoder.grow(&big, &mut rng).unwrap();
+        assert_eq!(grown.pe_freqs, 11);
+        assert_eq!(grown.fc_p.weight.shape().dims::<2>(), [3 + 6 * 11, 24]);
+        assert_eq!(grown.blocks.len(), 3);
+        assert_eq!(grown.hidden(), 24);
+        let after = run(&grown);
         for (a, b) in before.iter().zip(&after) {
             assert!((a - b).abs() <= 1e-5 * (1.0 + a.abs()), "{a} vs {b}");
         }
@@ -541,6 +680,20 @@ pub(crate) mod tests {
             before.iter().any(|v| v.abs() > 1e-3),
             "a trivial decoder tests nothing"
         );
+        // The grown weights learn: d SDF / d W is nonzero on the new hidden channels of W_p
+        // and of the new block's second layer.
+        let p = Tensor::<3>::from_data(TensorData::new(pts.clone(), [2, 20, 3]), &device);
+        let c = Tensor::<2>::from_data(TensorData::new(codes.clone(), [2, cfg.latent]), &device);
+        let grads = grown.sdf(p, c).sum().backward();
+        let g = |w: &Param<Tensor<2>>| to_vec(w.val().grad(&grads).unwrap());
+        // New channels are read through block 0's first layer and the output layer ...
+        let g_0 = g(&grown.blocks[0].fc_0.weight);
+        assert!(g_0[16 * 24..].iter().any(|v| *v != 0.0));
+        assert!(g(&grown.fc_out.weight)[16..].iter().any(|v| *v != 0.0));
+        // ... new inner units write through the second layer, and the new block learns.
+        let g_1 = g(&grown.blocks[0].fc_1.weight);
+        assert!(g_1[16 * 24..].iter().any(|v| *v != 0.0));
+        assert!(g(&grown.blocks[2].fc_1.weight).iter().any(|v| *v != 0.0));
     }
 
     #[test]

@@ -160,9 +160,9 @@ pub struct ShapeTrainConfig {
     pub stop_at: Option<usize>,
     /// Where the optimiser steps run (evaluation, saving and the codebook run on the CPU).
     pub compute: Compute,
-    /// Start from these weights (a `shape_prior.safetensors` of the same sizes, or of fewer
-    /// positional-encoding octaves, which [`ShapeDecoder::widen_positional_encoding`] widens)
-    /// instead of the seeded initialisation: continued training, a second cosine cycle.
+    /// Start from these weights (a `shape_prior.safetensors` of the same sizes, or with a
+    /// smaller decoder, which [`ShapeDecoder::grow`] grows to `model`'s sizes) instead of the
+    /// seeded initialisation: continued training, a second cosine cycle.
     pub init_from: Option<PathBuf>,
     /// Keep the encoder's weights fixed (needs `init_from`): only the decoder trains, so every
     /// part's code, and with it a denoiser trained on those codes, stays valid.
@@ -1044,9 +1044,10 @@ pub fn load_shape_prior(
     Ok(model)
 }
 
-/// Positional-encoding octaves of the decoder stored in the safetensors file `path`, from the
-/// shape of `decoder.fc_p.weight` in its header ([3 + 6 N_pe, hidden]).
-fn stored_pe_freqs(path: &Path) -> Result<usize, TrainError> {
+/// The decoder sizes stored in the safetensors file `path`, read from its header: N_pe and the
+/// hidden width from `decoder.fc_p.weight` ([3 + 6 N_pe, hidden]), the residual blocks from
+/// the `decoder.blocks.<i>.` names.
+fn stored_decoder_sizes(path: &Path) -> Result<(usize, usize, usize), TrainError> {
     use std::io::Read;
     let bad = |detail: String| TrainError::data(path, detail);
     let mut file = std::fs::File::open(path).map_err(TrainError::io(path))?;
@@ -1062,42 +1063,60 @@ fn stored_pe_freqs(path: &Path) -> Result<usize, TrainError> {
     file.read_exact(&mut header).map_err(TrainError::io(path))?;
     let header: Value = serde_json::from_slice(&header)
         .map_err(|e| bad(format!("safetensors header is not JSON: {e}")))?;
-    let d_in = header["decoder.fc_p.weight"]["shape"][0]
-        .as_u64()
-        .ok_or_else(|| bad("no decoder.fc_p.weight in the safetensors header".into()))?;
-    match d_in.checked_sub(3) {
-        Some(d) if d % 6 == 0 => Ok((d / 6) as usize),
-        _ => Err(bad(format!(
-            "decoder.fc_p.weight has {d_in} input rows, not 3 + 6 N_pe"
-        ))),
-    }
+    let shape = &header["decoder.fc_p.weight"]["shape"];
+    let (Some(d_in), Some(hidden)) = (shape[0].as_u64(), shape[1].as_u64()) else {
+        return Err(bad(
+            "no decoder.fc_p.weight in the safetensors header".into()
+        ));
+    };
+    let pe_freqs = match d_in.checked_sub(3) {
+        Some(d) if d % 6 == 0 => (d / 6) as usize,
+        _ => {
+            return Err(bad(format!(
+                "decoder.fc_p.weight has {d_in} input rows, not 3 + 6 N_pe"
+            )));
+        }
+    };
+    let blocks = (0..)
+        .take_while(|i| {
+            header
+                .get(format!("decoder.blocks.{i}.fc_0.weight"))
+                .is_some()
+        })
+        .count();
+    Ok((pe_freqs, hidden as usize, blocks))
 }
 
-/// `init_from`'s weights as a model of `cfg`. When the file's decoder has fewer
-/// positional-encoding octaves than `cfg.pe_freqs`, it is widened
-/// ([`ShapeDecoder::widen_positional_encoding`]): same SDF, room for finer detail.
+/// `init_from`'s weights as a model of `cfg`. When the file's decoder is smaller than `cfg`'s
+/// (fewer positional-encoding octaves, a narrower hidden width, fewer blocks) it is grown to
+/// `cfg` ([`ShapeDecoder::grow`]: the same SDF, room for finer detail; new weights seeded
+/// from `seed`); every other size must match the file.
 fn load_init(
     path: &Path,
     cfg: &ShapePriorConfig,
+    seed: u64,
     device: &Device,
 ) -> Result<ShapePrior, TrainError> {
-    let stored = stored_pe_freqs(path)?;
-    if stored >= cfg.pe_freqs {
-        return load_shape_prior(path, cfg, device);
-    }
-    let narrow = ShapePriorConfig {
-        pe_freqs: stored,
+    let (pe_freqs, decoder_hidden, decoder_blocks) = stored_decoder_sizes(path)?;
+    let stored = ShapePriorConfig {
+        pe_freqs: pe_freqs.min(cfg.pe_freqs),
+        decoder_hidden: decoder_hidden.min(cfg.decoder_hidden),
+        decoder_blocks: decoder_blocks.min(cfg.decoder_blocks),
         ..*cfg
     };
-    let model = load_shape_prior(path, &narrow, device)?;
+    if stored == *cfg {
+        return load_shape_prior(path, cfg, device);
+    }
+    let model = load_shape_prior(path, &stored, device)?;
     tracing::info!(
-        from = stored,
-        to = cfg.pe_freqs,
-        "widening the decoder's positional encoding"
+        from = ?(stored.pe_freqs, stored.decoder_hidden, stored.decoder_blocks),
+        to = ?(cfg.pe_freqs, cfg.decoder_hidden, cfg.decoder_blocks),
+        "growing the decoder (N_pe, hidden, blocks)"
     );
+    let mut rng = Rng::fork(seed, 0x4752_4f57);
     Ok(ShapePrior {
         encoder: model.encoder,
-        decoder: model.decoder.widen_positional_encoding(cfg.pe_freqs),
+        decoder: model.decoder.grow(cfg, &mut rng)?,
     })
 }
 
@@ -1682,7 +1701,7 @@ impl<'a> Trainer<'a> {
     fn new(cfg: &'a ShapeTrainConfig, parts: &'a [PartSamples]) -> Result<Self, TrainError> {
         let device = cfg.compute.autodiff();
         let model = match &cfg.init_from {
-            Some(init) => load_init(init, &cfg.model, &device)?,
+            Some(init) => load_init(init, &cfg.model, cfg.seed, &device)?,
             None => ShapePrior::with_seed(&cfg.model, cfg.seed, &device),
         };
         Ok(Trainer {

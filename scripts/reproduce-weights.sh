@@ -45,6 +45,10 @@
 #   DECODER_STEPS (3000; 0: no decoder cycle)  DECODER_CYCLES (2; 0: none)
 #   DECODER_EIKONAL ("0.01 0.03": the eikonal weight of each cycle, one value per cycle; 0 is
 #   the plain cycle, which raises the shape IoU more but aligns guided fits worse, EVALUATION.md)
+#   DECODER_WRONG_SIDE ("0 0": the --wrong-side weight of each cycle, one value per cycle; a
+#   third cycle with 10 raises the shape IoU 0.775 -> 0.812 but costs category accuracy,
+#   EVALUATION.md "ws10c": DECODER_CYCLES=3 DECODER_EIKONAL="0.01 0.03 0.03"
+#   DECODER_WRONG_SIDE="0 0 10")
 #   DECODER_FLAGS ("": more flags for every decoder cycle)
 #   EVAL (1: run eval shape and eval generative; 0: skip)
 # Earlier shipped weights (their manifests under docs/eval/):
@@ -71,6 +75,7 @@ DECODER_STEPS=${DECODER_STEPS:-3000}
 DECODER_FLAGS=${DECODER_FLAGS:-}
 DECODER_CYCLES=${DECODER_CYCLES:-2}
 DECODER_EIKONAL=${DECODER_EIKONAL-"0.01 0.03"}
+DECODER_WRONG_SIDE=${DECODER_WRONG_SIDE-"0 0"}
 SHAPE_BATCH=${SHAPE_BATCH-"--batch-parts 128 --queries-per-part 128 --surface-points 64"}
 SHAPE_BACKWARD=${SHAPE_BACKWARD:-host}
 DENOISER_SHARDS=${DENOISER_SHARDS:-2}
@@ -94,6 +99,17 @@ for w in "${eikonal[@]}"; do
 done
 if [ "$DECODER_STEPS" != 0 ] && [ "${#eikonal[@]}" != "$DECODER_CYCLES" ]; then
   echo "invalid DECODER_EIKONAL: need one eikonal weight per decoder cycle ($DECODER_CYCLES), got ${#eikonal[@]}: '$DECODER_EIKONAL'" >&2
+  exit 2
+fi
+read -r -a wrong_side <<< "$DECODER_WRONG_SIDE"
+for w in "${wrong_side[@]}"; do
+  if ! [[ "$w" =~ ^[0-9]*\.?[0-9]+$ ]]; then
+    echo "invalid DECODER_WRONG_SIDE: need one non-negative number per decoder cycle, got '$w' in '$DECODER_WRONG_SIDE'" >&2
+    exit 2
+  fi
+done
+if [ "$DECODER_STEPS" != 0 ] && [ "${#wrong_side[@]}" != "$DECODER_CYCLES" ]; then
+  echo "invalid DECODER_WRONG_SIDE: need one wrong-side weight per decoder cycle ($DECODER_CYCLES), got ${#wrong_side[@]}: '$DECODER_WRONG_SIDE'" >&2
   exit 2
 fi
 for knob in DENOISER_SHARDS RESTART_SHARDS SHAPE_SHARDS; do
@@ -211,14 +227,14 @@ if [ "$DECODER_STEPS" != 0 ]; then
   # fields are still flatter near the surface than its meshes (sqrt(E_pc)/D_pc 0.74 on guided
   # fits, against 0.94 for the weights before) and fits align 15 % worse; the second, stronger
   # cycle (0.03) brings that back to 0.92 (EVALUATION.md). Cycle i uses seed i - 1 (its query
-  # draws), the i-th DECODER_EIKONAL weight, and starts from the decoder the previous cycle
-  # installed.
+  # draws), the i-th DECODER_EIKONAL and DECODER_WRONG_SIDE weights, and starts from the
+  # decoder the previous cycle installed.
   for ((cycle = 1; cycle <= DECODER_CYCLES; cycle++)); do
     # shellcheck disable=SC2086
     run train shape --data "$OUT/train" --out "$OUT/shape_decoder$cycle" --steps "$DECODER_STEPS" \
       --seed $((cycle - 1)) --init-from "$OUT/weights" --freeze-encoder --lr 5e-4 \
-      --eikonal "${eikonal[$((cycle - 1))]}" --batch-shards "$SHAPE_SHARDS" $SHAPE_BATCH $SHAPE_FLAGS \
-      $DECODER_FLAGS
+      --eikonal "${eikonal[$((cycle - 1))]}" --wrong-side "${wrong_side[$((cycle - 1))]}" \
+      --batch-shards "$SHAPE_SHARDS" $SHAPE_BATCH $SHAPE_FLAGS $DECODER_FLAGS
     cb=(--no-codebook)
     [ "$cycle" = "$DECODER_CYCLES" ] && cb=()
     run train install-shape --shape "$OUT/shape_decoder$cycle" --weights "$OUT/weights" "${cb[@]}"

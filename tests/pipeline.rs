@@ -916,9 +916,12 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     assert_eq!(cycles.len(), 1, "{m:#}");
     assert_eq!(cycles[0]["config"]["seed"], 0, "{m:#}");
     assert_eq!(cycles[0]["config"]["freeze_encoder"], true, "{m:#}");
-    // Each cycle with its own eikonal weight, as the shipped decoder was trained: 0.01, 0.03.
+    // Each cycle with its own eikonal weight, as the shipped decoder was trained: 0.01, 0.03;
+    // no wrong-side term (DECODER_WRONG_SIDE "0 0").
     assert_eq!(cycles[0]["config"]["eikonal"], 0.01, "{m:#}");
     assert_eq!(m["training"]["shape"]["config"]["eikonal"], 0.03, "{m:#}");
+    assert_eq!(m["training"]["shape"]["config"]["wrong_side"], 0.0, "{m:#}");
+    assert!(err.contains("--wrong-side 0 "), "{err}");
     // Only the last state gets a retrieval codebook: the five denoiser runs and the first
     // install skip theirs (the recipe's time budget), the second install builds it (above).
     assert_eq!(err.matches("--no-codebook").count(), 6, "{err}");
@@ -955,6 +958,8 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         (&[("SHAPE_BACKWARD", "fast")][..], "SHAPE_BACKWARD"),
         (&[("DECODER_EIKONAL", "0.01 strong")][..], "strong"),
         (&[("DECODER_EIKONAL", "0.01")][..], "DECODER_EIKONAL"),
+        (&[("DECODER_WRONG_SIDE", "0 much")][..], "much"),
+        (&[("DECODER_WRONG_SIDE", "10")][..], "DECODER_WRONG_SIDE"),
         (&[("DENOISER_SHARDS", "0")][..], "DENOISER_SHARDS"),
         (&[("RESTART_SHARDS", "two")][..], "RESTART_SHARDS"),
         (&[("RESTART_STEPS", "6000")][..], "RESTART_STEPS"),
@@ -989,7 +994,8 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
 
     // STAGE2=0, RESTART_STEPS=0: two denoiser runs, the second resuming at STAGE1 and running to STEPS; the
     // first prior with burn's autodiff (SHAPE_BACKWARD=burn), the single-pass steps of the
-    // weights shipped before (DENOISER_SHARDS=1, SHAPE_SHARDS=1), one plain decoder cycle.
+    // weights shipped before (DENOISER_SHARDS=1, SHAPE_SHARDS=1), one decoder cycle without
+    // the eikonal term and with the wrong-side term (DECODER_WRONG_SIDE=10).
     let two = root.path().join("two");
     let o = repro(
         &two,
@@ -1000,6 +1006,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             ("DENOISER_SHARDS", "1"),
             ("DECODER_CYCLES", "1"),
             ("DECODER_EIKONAL", "0"),
+            ("DECODER_WRONG_SIDE", "10"),
             ("DECAY_OVERLAP", "2"),
             ("SHAPE_SHARDS", "1"),
         ],
@@ -1022,6 +1029,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         "{m:#}"
     );
     assert_eq!(m["training"]["shape"]["config"]["eikonal"], 0.0, "{m:#}");
+    assert_eq!(m["training"]["shape"]["config"]["wrong_side"], 10.0, "{m:#}");
     assert!(m["training"]["shape_cycles"].is_null(), "one cycle: {m:#}");
     assert_eq!(
         m["training"]["shape_base"]["config"]["batch_shards"], 1,

@@ -90,28 +90,27 @@ if ! [[ "$DECODER_CYCLES" =~ ^[0-9]+$ ]]; then
   echo "invalid DECODER_CYCLES: need a whole number of decoder cycles (0 for none), got '$DECODER_CYCLES'" >&2
   exit 2
 fi
-read -r -a eikonal <<< "$DECODER_EIKONAL"
-for w in "${eikonal[@]}"; do
-  if ! [[ "$w" =~ ^[0-9]*\.?[0-9]+$ ]]; then
-    echo "invalid DECODER_EIKONAL: need one non-negative number per decoder cycle, got '$w' in '$DECODER_EIKONAL'" >&2
+# A knob holding one non-negative number per decoder cycle: $1 the knob, $2 what each number
+# is, $3 the array that receives them.
+per_cycle() {
+  local knob=$1 what=$2
+  local -n list=$3
+  read -r -a list <<< "${!knob}"
+  for w in "${list[@]}"; do
+    if ! [[ "$w" =~ ^[0-9]*\.?[0-9]+$ ]]; then
+      echo "invalid $knob: need one non-negative number per decoder cycle, got '$w' in '${!knob}'" >&2
+      exit 2
+    fi
+  done
+  if [ "$DECODER_STEPS" != 0 ] && [ "${#list[@]}" != "$DECODER_CYCLES" ]; then
+    echo "invalid $knob: need one $what per decoder cycle ($DECODER_CYCLES), got ${#list[@]}: '${!knob}'" >&2
     exit 2
   fi
-done
-if [ "$DECODER_STEPS" != 0 ] && [ "${#eikonal[@]}" != "$DECODER_CYCLES" ]; then
-  echo "invalid DECODER_EIKONAL: need one eikonal weight per decoder cycle ($DECODER_CYCLES), got ${#eikonal[@]}: '$DECODER_EIKONAL'" >&2
-  exit 2
-fi
-read -r -a wrong_side <<< "$DECODER_WRONG_SIDE"
-for w in "${wrong_side[@]}"; do
-  if ! [[ "$w" =~ ^[0-9]*\.?[0-9]+$ ]]; then
-    echo "invalid DECODER_WRONG_SIDE: need one non-negative number per decoder cycle, got '$w' in '$DECODER_WRONG_SIDE'" >&2
-    exit 2
-  fi
-done
-if [ "$DECODER_STEPS" != 0 ] && [ "${#wrong_side[@]}" != "$DECODER_CYCLES" ]; then
-  echo "invalid DECODER_WRONG_SIDE: need one wrong-side weight per decoder cycle ($DECODER_CYCLES), got ${#wrong_side[@]}: '$DECODER_WRONG_SIDE'" >&2
-  exit 2
-fi
+}
+eikonal=()
+wrong_side=()
+per_cycle DECODER_EIKONAL "eikonal weight" eikonal
+per_cycle DECODER_WRONG_SIDE "wrong-side weight" wrong_side
 for knob in DENOISER_SHARDS RESTART_SHARDS SHAPE_SHARDS; do
   if ! [[ "${!knob}" =~ ^[1-9][0-9]*$ ]]; then
     echo "invalid $knob: need a whole number of batch slices, at least 1, got '${!knob}'" >&2

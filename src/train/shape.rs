@@ -2379,19 +2379,28 @@ mod tests {
             e.contains(WEIGHTS_FILE) && e.contains("decoder.fc_p.weight"),
             "{e}"
         );
-        // A config of other sizes is refused with the file's name.
-        let cfg = ShapeTrainConfig {
-            init_from: Some(base.join(WEIGHTS_FILE)),
-            model: ShapePriorConfig {
+        // A smaller decoder, or an encoder of other sizes (which growth never touches), is
+        // refused with the file's name.
+        for model in [
+            ShapePriorConfig {
                 decoder_hidden: 24,
                 ..short.model
             },
-            ..short.clone()
-        };
-        let e = train_shape(&train, &cfg, &data.path().join("bad"), &mut |_| {})
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains(WEIGHTS_FILE), "{e}");
+            ShapePriorConfig {
+                encoder_hidden: 48,
+                ..short.model
+            },
+        ] {
+            let cfg = ShapeTrainConfig {
+                init_from: Some(base.join(WEIGHTS_FILE)),
+                model,
+                ..short.clone()
+            };
+            let e = train_shape(&train, &cfg, &data.path().join("bad"), &mut |_| {})
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(WEIGHTS_FILE), "{e}");
+        }
         // Freezing a random encoder is refused.
         let cfg = ShapeTrainConfig {
             freeze_encoder: true,

@@ -256,8 +256,9 @@ enum TrainCommand {
     /// Install a `train shape --freeze-encoder` output into a weights directory: its decoder
     /// replaces the installed one while every code, and so the denoiser, stays valid (refused
     /// when the encoder differs). The decoder may be larger (`train shape --init-from` with a
-    /// larger `--pe-freqs`, `--decoder-hidden` or `--decoder-blocks` grows it), never smaller. Rewrites the manifest and the codebook and clears the
-    /// metrics, which `eval generative --write-manifest` measures again.
+    /// larger `--pe-freqs`, `--decoder-hidden` or `--decoder-blocks` grows it), never
+    /// smaller. Rewrites the manifest and the codebook and clears the metrics, which
+    /// `eval generative --write-manifest` measures again.
     InstallShape(InstallShapeArgs),
 }
 

@@ -1029,7 +1029,10 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         "{m:#}"
     );
     assert_eq!(m["training"]["shape"]["config"]["eikonal"], 0.0, "{m:#}");
-    assert_eq!(m["training"]["shape"]["config"]["wrong_side"], 10.0, "{m:#}");
+    assert_eq!(
+        m["training"]["shape"]["config"]["wrong_side"], 10.0,
+        "{m:#}"
+    );
     assert!(m["training"]["shape_cycles"].is_null(), "one cycle: {m:#}");
     assert_eq!(
         m["training"]["shape_base"]["config"]["batch_shards"], 1,

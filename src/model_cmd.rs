@@ -184,23 +184,13 @@ pub fn install_shape(a: InstallShapeArgs) -> anyhow::Result<()> {
     let cfg = model_config_of(&report, &report_path)?;
     let installed_cfg = manifest.shape_prior.config;
     // A decoder grown by train shape --init-from (more octaves, wider, deeper) keeps the
-    // encoder and the code space: only those three sizes may differ, and only upwards.
-    let same_sizes = physnap::model::shape_prior::ShapePriorConfig {
-        pe_freqs: installed_cfg.pe_freqs,
-        decoder_hidden: installed_cfg.decoder_hidden,
-        decoder_blocks: installed_cfg.decoder_blocks,
-        ..cfg
-    };
-    if same_sizes != installed_cfg
-        || cfg.pe_freqs < installed_cfg.pe_freqs
-        || cfg.decoder_hidden < installed_cfg.decoder_hidden
-        || cfg.decoder_blocks < installed_cfg.decoder_blocks
-    {
-        bail!(
-            "{}: model sizes {cfg:?} differ from the installed shape prior's {installed_cfg:?} (only pe_freqs, decoder_hidden and decoder_blocks may grow)",
-            report_path.display(),
-        );
-    }
+    // encoder and the code space; any other difference, or a smaller decoder, is refused.
+    cfg.check_decoder_growth(&installed_cfg).with_context(|| {
+        format!(
+            "{}: model sizes {cfg:?} do not grow the installed shape prior's {installed_cfg:?}",
+            report_path.display()
+        )
+    })?;
     let candidate = a.shape.join("shape_prior.safetensors");
     let device = physnap::model::cpu();
     let old = load_shape_prior(&installed, &installed_cfg, &device)?;

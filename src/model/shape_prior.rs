@@ -104,6 +104,43 @@ impl ShapePriorConfig {
         }
     }
 
+    /// Check that a decoder of `self`'s sizes can be grown from one of `from`'s
+    /// ([`ShapeDecoder::grow`]): every size outside the decoder equal, and N_pe, the decoder
+    /// width and its blocks each at least `from`'s. The error names the first field that
+    /// differs or would shrink, its limit and value.
+    pub fn check_decoder_growth(&self, from: &ShapePriorConfig) -> Result<(), ModelError> {
+        let refuse = |field: &str, limit: String, value: String| {
+            Err(ModelError::Config {
+                field: field.into(),
+                limit,
+                value,
+            })
+        };
+        for (field, want, have) in [
+            ("pe_freqs", self.pe_freqs, from.pe_freqs),
+            ("decoder_hidden", self.decoder_hidden, from.decoder_hidden),
+            ("decoder_blocks", self.decoder_blocks, from.decoder_blocks),
+        ] {
+            if want < have {
+                return refuse(field, format!("at least {have}"), want.to_string());
+            }
+        }
+        for (field, want, have) in [
+            ("latent", self.latent, from.latent),
+            ("encoder_hidden", self.encoder_hidden, from.encoder_hidden),
+            ("encoder_blocks", self.encoder_blocks, from.encoder_blocks),
+        ] {
+            if want != have {
+                return refuse(field, format!("{have}, as before"), want.to_string());
+            }
+        }
+        if self.code_every_block != from.code_every_block {
+            let have = from.code_every_block.to_string();
+            return refuse("code_every_block", have, self.code_every_block.to_string());
+        }
+        Ok(())
+    }
+
     /// Check every size against its range.
     pub fn validate(&self) -> Result<(), ModelError> {
         let check = |field: &str, value: usize, lo: usize, hi: usize| {
@@ -287,31 +324,20 @@ impl ShapeDecoder {
     pub fn grow(self, cfg: &ShapePriorConfig, rng: &mut Rng) -> Result<Self, ModelError> {
         let h = self.hidden();
         let (blocks, rows, f) = (self.blocks.len(), self.feature_width() / h, self.latent());
-        let refuse = |field: &str, limit: String, value: usize| {
-            Err(ModelError::Config {
-                field: field.into(),
-                limit,
-                value: value.to_string(),
-            })
+        let from = ShapePriorConfig {
+            pe_freqs: self.pe_freqs,
+            decoder_hidden: h,
+            decoder_blocks: blocks,
+            latent: f,
+            ..*cfg
         };
-        for (field, want, have) in [
-            ("pe_freqs", cfg.pe_freqs, self.pe_freqs),
-            ("decoder_hidden", cfg.decoder_hidden, h),
-            ("decoder_blocks", cfg.decoder_blocks, blocks),
-        ] {
-            if want < have {
-                return refuse(field, format!("at least the grown decoder's {have}"), want);
-            }
-        }
-        if cfg.latent != f {
-            return refuse("latent", format!("the grown decoder's {f}"), cfg.latent);
-        }
+        cfg.check_decoder_growth(&from)?;
         if cfg.code_rows() != rows {
-            return refuse(
-                "code_every_block",
-                format!("{rows} code rows"),
-                cfg.code_rows(),
-            );
+            return Err(ModelError::Config {
+                field: "code_every_block".into(),
+                limit: format!("{rows} code rows"),
+                value: cfg.code_rows().to_string(),
+            });
         }
         let device = self.fc_p.weight.device();
         let hh = cfg.decoder_hidden;
@@ -342,10 +368,12 @@ impl ShapeDecoder {
             let w = w.expect("f32 weights");
             let (mut row_old, mut col_old) = (vec![false; r_new], vec![false; c_new]);
             let mut placed = vec![None; r_new * c_new];
+            for j in 0..c {
+                col_old[col_at(j)] = true;
+            }
             for i in 0..r {
                 row_old[row_at(i)] = true;
                 for j in 0..c {
-                    col_old[col_at(j)] = true;
                     placed[row_at(i) * c_new + col_at(j)] = Some(w[i * c + j]);
                 }
             }
@@ -667,6 +695,17 @@ pub(crate) mod tests {
                 .to_string();
             assert!(e.contains(field), "{e}");
         }
+        // install-shape's check: the encoder's sizes may not change with the decoder's.
+        let other_encoder = ShapePriorConfig {
+            encoder_hidden: 32,
+            ..big
+        };
+        let e = other_encoder
+            .check_decoder_growth(&cfg)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("encoder_hidden"), "{e}");
+        big.check_decoder_growth(&cfg).unwrap();
         let grown = decoder.grow(&big, &mut rng).unwrap();
         assert_eq!(grown.pe_freqs, 11);
         assert_eq!(grown.fc_p.weight.shape().dims::<2>(), [3 + 6 * 11, 24]);

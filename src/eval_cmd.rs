@@ -26,7 +26,7 @@ use physnap::io::manifest::{LoadedModels, load_models};
 use physnap::mesh::MeshingOptions;
 use physnap::model::shape_prior::LatentSdfDecoder;
 
-use super::{EvalGenerativeArgs, EvalReconstructionArgs, EvalShapeArgs};
+use super::{EvalDenoiserArgs, EvalGenerativeArgs, EvalReconstructionArgs, EvalShapeArgs};
 
 /// The imported data set's `dataset.json`, with its path for error messages.
 fn read_index(data: &Path) -> anyhow::Result<(std::path::PathBuf, serde_json::Value)> {
@@ -1085,6 +1085,83 @@ pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
         doc["seconds"] = json!(started.elapsed().as_secs_f64());
         write_report(out, &doc)?;
         println!("report: {}", out.display());
+    }
+    Ok(())
+}
+
+/// `physnap eval denoiser`: the held-out ε-loss per noise level, with and without the
+/// category (module `physnap::train::held_out`).
+pub fn denoiser(a: EvalDenoiserArgs) -> anyhow::Result<()> {
+    use physnap::train::{diffusion::load_split, held_out::held_out_loss};
+    if !["train", "val", "test"].contains(&a.split.as_str()) {
+        bail!("invalid --split {:?} (must be train, val or test)", a.split);
+    }
+    let started = Instant::now();
+    let device = physnap::model::cpu();
+    let models = load_models(&a.weights, &device)
+        .with_context(|| format!("loading weights from {}", a.weights.display()))?;
+    let data = load_split(&a.data, &a.shape, &a.split)?;
+    let scales = &models.manifest.feature_scales;
+    let r = held_out_loss(&models.denoiser, &data, scales, &a.levels, a.seed)?;
+    println!(
+        "denoiser ε-loss on {} {} objects (seed {}), feature scales of {}:",
+        r.objects,
+        a.split,
+        a.seed,
+        a.weights.display()
+    );
+    println!(
+        "{:>5}  {:>10}  {:>12}  {:>6}",
+        "t", "category", "no category", "gain"
+    );
+    for (i, t) in r.levels.iter().enumerate() {
+        match &r.unconditional {
+            Some(u) => println!(
+                "{t:>5}  {:>10.5}  {:>12.5}  {:>6.3}",
+                r.conditional[i],
+                u[i],
+                u[i] / r.conditional[i]
+            ),
+            None => println!("{t:>5}  {:>10.5}", r.conditional[i]),
+        }
+    }
+    let mean_u = r
+        .unconditional
+        .as_ref()
+        .map(|u| u.iter().sum::<f64>() / u.len() as f64);
+    match mean_u {
+        Some(u) => println!(
+            " mean  {:>10.5}  {u:>12.5}  {:>6.3}   ({:.1} s)",
+            r.mean_conditional(),
+            u / r.mean_conditional(),
+            started.elapsed().as_secs_f64()
+        ),
+        None => println!(
+            " mean  {:>10.5}   ({:.1} s)",
+            r.mean_conditional(),
+            started.elapsed().as_secs_f64()
+        ),
+    }
+    if let Some(out) = &a.out {
+        let report = json!({
+            "format": "physnap.eval_denoiser/v1",
+            "command": std::env::args().collect::<Vec<_>>().join(" "),
+            "weights": a.weights,
+            "denoiser_sha256": models.manifest.denoiser.sha256,
+            "data": a.data,
+            "shape": a.shape,
+            "split": a.split,
+            "seed": a.seed,
+            "objects": r.objects,
+            "levels": r.levels,
+            "conditional": r.conditional,
+            "unconditional": r.unconditional,
+            "mean_conditional": r.mean_conditional(),
+            "mean_unconditional": mean_u,
+            "seconds": started.elapsed().as_secs_f64(),
+        });
+        std::fs::write(out, serde_json::to_string_pretty(&report)? + "\n")
+            .with_context(|| format!("writing {}", out.display()))?;
     }
     Ok(())
 }

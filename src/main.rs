@@ -95,6 +95,41 @@ enum EvalCommand {
     /// projection, decoder meshing) against the originals: what the shape prior loses, and
     /// the category accuracy a perfect denoiser could reach with it.
     Reconstruction(EvalReconstructionArgs),
+    /// The denoiser's ε-loss on a held-out split at fixed noise levels, with each object's
+    /// category and with the "no category" row: generalisation and category use in about a
+    /// minute, without sampling (paired: the same seed gives every model the same inputs).
+    Denoiser(EvalDenoiserArgs),
+}
+
+#[derive(Args, Debug)]
+struct EvalDenoiserArgs {
+    /// Weights directory with manifest.json: its denoiser and feature scales are measured.
+    #[arg(long, env = "PHYSNAP_WEIGHTS", default_value = "weights")]
+    weights: PathBuf,
+    /// Imported data set (output of `physnap data import`).
+    #[arg(long, env = "PHYSNAP_DATA")]
+    data: PathBuf,
+    /// Shape prior directory holding every part's code (`train shape` or `train encode`
+    /// output): the codes the denoiser was trained on.
+    #[arg(long, env = "PHYSNAP_SHAPE")]
+    shape: PathBuf,
+    /// Split to measure: val (default), test, or train (the gap to val is the overfitting).
+    #[arg(long, env = "PHYSNAP_EVAL_SPLIT", default_value = "val")]
+    split: String,
+    /// Noise levels t (0..999), comma-separated.
+    #[arg(
+        long,
+        env = "PHYSNAP_EVAL_LEVELS",
+        value_delimiter = ',',
+        default_value = "10,50,100,200,300,400,500,600,800,950"
+    )]
+    levels: Vec<usize>,
+    /// Seed of the node permutations and noise (the same seed pairs two models' inputs).
+    #[arg(long, env = "PHYSNAP_SEED", default_value_t = 0)]
+    seed: u64,
+    /// Also write the report as JSON here.
+    #[arg(long, env = "PHYSNAP_EVAL_OUT")]
+    out: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -488,6 +523,10 @@ struct DiffusionArgs {
     /// The box-overlap penalty counts only samples with t below this (1..=500).
     #[arg(long, env = "PHYSNAP_DIFFUSION_OVERLAP_MAX_T", default_value_t = physnap::train::diffusion::DEFAULT_OVERLAP_MAX_T)]
     overlap_max_t: usize,
+    /// Share of training samples that see the "no category" row instead of their category
+    /// (0..=1): what classifier-free category guidance and unconditional sampling use.
+    #[arg(long, env = "PHYSNAP_DIFFUSION_CATEGORY_DROPOUT", default_value_t = physnap::train::diffusion::DEFAULT_CATEGORY_DROPOUT)]
+    category_dropout: f64,
     /// Slices each step's batch is split into, their passes run in parallel (one per core is
     /// the point; results depend on this number, not on the thread count; 1 = the single-pass
     /// step of runs before 2026-11-28). Measured on the CPU only: with `--device gpu` the
@@ -996,6 +1035,7 @@ fn run(command: Command) -> anyhow::Result<()> {
             EvalCommand::Guided(a) => model_cmd::eval_guided(*a),
             EvalCommand::Shape(a) => eval_cmd::shape(a),
             EvalCommand::Reconstruction(a) => eval_cmd::reconstruction(a),
+            EvalCommand::Denoiser(a) => eval_cmd::denoiser(a),
         },
     }
 }

@@ -297,9 +297,9 @@ pub fn diffusion(a: DiffusionArgs) -> anyhow::Result<()> {
         high_noise_cap: a.high_noise_cap,
         overlap_weight: a.overlap_weight,
         overlap_max_t: a.overlap_max_t,
+        category_dropout: a.category_dropout,
         batch_shards: a.batch_shards,
         compute,
-        ..DiffusionTrainConfig::default()
     };
     let pb = super::progress_bar(cfg.steps, "diffusion");
     let report = train_diffusion(&data, &cfg, &a.out, a.resume, &mut |p| {

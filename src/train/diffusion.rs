@@ -190,7 +190,7 @@ impl Default for DiffusionTrainConfig {
             noise_levels: 4,
             lr: 2e-4,
             seed: 12345,
-            category_dropout: 0.2,
+            category_dropout: DEFAULT_CATEGORY_DROPOUT,
             checkpoint_every: 1000,
             lr_decay_start: 0,
             lr_final_factor: 0.1,
@@ -208,6 +208,9 @@ impl Default for DiffusionTrainConfig {
 
 /// Default `overlap_max_t`.
 pub const DEFAULT_OVERLAP_MAX_T: usize = 300;
+
+/// Default share of training samples that see the "no category" row.
+pub const DEFAULT_CATEGORY_DROPOUT: f64 = 0.2;
 /// Largest `overlap_max_t`: beyond it x̂₀ = (x_t − √(1 − ᾱ_t) ε̂) / √ᾱ_t amplifies the
 /// prediction's error more than 4×, and the penalty swamps the ε-loss (a tiny run counting
 /// every t did not learn: its loss rose from ≈ 620 to ≈ 950 over 60 steps).
@@ -865,10 +868,10 @@ pub fn train_diffusion(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn tiny_data() -> DiffusionData {
+    pub(crate) fn tiny_data() -> DiffusionData {
         let mut rng = Rng::new(3);
         let mut graphs = Vec::new();
         let mut categories = Vec::new();
@@ -902,7 +905,7 @@ mod tests {
         }
     }
 
-    fn tiny_config(steps: usize) -> DiffusionTrainConfig {
+    pub(crate) fn tiny_config(steps: usize) -> DiffusionTrainConfig {
         DiffusionTrainConfig {
             model: DenoiserConfig {
                 width: 32,

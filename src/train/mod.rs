@@ -10,6 +10,7 @@
 pub mod codebook;
 pub mod diffusion;
 pub mod ema;
+pub mod held_out;
 pub mod shape;
 
 use std::path::{Path, PathBuf};

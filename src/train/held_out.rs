@@ -30,9 +30,6 @@ use crate::model::denoiser::Denoiser;
 /// Objects per denoiser forward.
 const CHUNK: usize = 64;
 
-/// The default noise levels: ten, spread over the schedule.
-pub const DEFAULT_LEVELS: [usize; 10] = [10, 50, 100, 200, 300, 400, 500, 600, 800, 950];
-
 /// The held-out loss at each noise level.
 #[derive(Debug, Clone, PartialEq)]
 pub struct HeldOutLoss {

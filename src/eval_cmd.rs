@@ -1125,10 +1125,7 @@ pub fn denoiser(a: EvalDenoiserArgs) -> anyhow::Result<()> {
             None => println!("{t:>5}  {:>10.5}", r.conditional[i]),
         }
     }
-    let mean_u = r
-        .unconditional
-        .as_ref()
-        .map(|u| u.iter().sum::<f64>() / u.len() as f64);
+    let mean_u = r.mean_unconditional();
     match mean_u {
         Some(u) => println!(
             " mean  {:>10.5}  {u:>12.5}  {:>6.3}   ({:.1} s)",

@@ -206,11 +206,11 @@ impl Default for DiffusionTrainConfig {
     }
 }
 
-/// Default `overlap_max_t`.
-pub const DEFAULT_OVERLAP_MAX_T: usize = 300;
-
 /// Default share of training samples that see the "no category" row.
 pub const DEFAULT_CATEGORY_DROPOUT: f64 = 0.2;
+
+/// Default `overlap_max_t`.
+pub const DEFAULT_OVERLAP_MAX_T: usize = 300;
 /// Largest `overlap_max_t`: beyond it x̂₀ = (x_t − √(1 − ᾱ_t) ε̂) / √ᾱ_t amplifies the
 /// prediction's error more than 4×, and the penalty swamps the ε-loss (a tiny run counting
 /// every t did not learn: its loss rose from ≈ 620 to ≈ 950 over 60 steps).
@@ -566,6 +566,16 @@ pub fn graph_noise(
     (v, randn([b, NUM_EDGES, EDGE_DIM]))
 }
 
+/// A uniformly random order of the K node slots (Fisher–Yates), the permutation each training
+/// object gets (method.md §1.6) and `eval denoiser` draws the same way.
+pub(crate) fn random_slots(rng: &mut Rng) -> [usize; K] {
+    let mut perm: [usize; K] = std::array::from_fn(|i| i);
+    for i in (1..K).rev() {
+        perm.swap(i, rng.int(0, i));
+    }
+    perm
+}
+
 /// Train (or resume training) the denoiser; writes `denoiser.safetensors`, `checkpoint.json`
 /// and `diffusion_train.json` into `out`.
 pub fn train_diffusion(
@@ -708,11 +718,9 @@ pub fn train_diffusion(
         let (mut depth, mut mask) = (Vec::new(), Vec::new());
         for _ in 0..cfg.batch_objects {
             let k = rng.int(0, data.graphs.len() - 1);
-            let mut perm: [usize; K] = std::array::from_fn(|i| i);
-            for i in (1..K).rev() {
-                perm.swap(i, rng.int(0, i));
-            }
-            let raw = data.graphs[k].permuted(&perm).map_err(TrainError::Core)?;
+            let raw = data.graphs[k]
+                .permuted(&random_slots(&mut rng))
+                .map_err(TrainError::Core)?;
             let pairs = overlap_on.then(|| pair_targets(&raw));
             let g = raw.scaled(&data.scales);
             for _ in 0..cfg.noise_levels {

@@ -21,10 +21,10 @@
 use burn::tensor::{Int, Tensor, TensorData};
 
 use super::TrainError;
-use super::diffusion::{DiffusionData, graph_noise, grouped_loss_per_sample};
+use super::diffusion::{DiffusionData, graph_noise, grouped_loss_per_sample, random_slots};
 use crate::data::rng::Rng;
 use crate::engine::schedule::Schedule;
-use crate::graph::{FeatureScales, K};
+use crate::graph::FeatureScales;
 use crate::model::denoiser::Denoiser;
 
 /// Objects per denoiser forward.
@@ -48,6 +48,12 @@ impl HeldOutLoss {
     /// Mean over the levels of the conditional loss.
     pub fn mean_conditional(&self) -> f64 {
         self.conditional.iter().sum::<f64>() / self.conditional.len() as f64
+    }
+
+    /// Mean over the levels of the "no category" loss (`None` without categories).
+    pub fn mean_unconditional(&self) -> Option<f64> {
+        let u = self.unconditional.as_ref()?;
+        Some(u.iter().sum::<f64>() / u.len() as f64)
     }
 }
 
@@ -98,10 +104,7 @@ pub fn held_out_loss(
             let mut rng = Rng::fork(seed ^ ((t as u64) << 32), chunk as u64);
             let mut x0 = Vec::with_capacity(bsz);
             for g in &data.graphs[start..end] {
-                let mut perm: [usize; K] = std::array::from_fn(|i| i);
-                for i in (1..K).rev() {
-                    perm.swap(i, rng.int(0, i));
-                }
+                let perm = random_slots(&mut rng);
                 x0.push(g.permuted(&perm).map_err(TrainError::Core)?.scaled(scales));
             }
             let (v0, e0) = crate::engine::to_tensors(&x0, &device);

@@ -210,6 +210,44 @@ struct CategoryHits {
 }
 
 impl CategoryHits {
+    /// One empty row per category, in `cats`' order.
+    fn table(cats: &[String]) -> Vec<CategoryHits> {
+        cats.iter()
+            .map(|c| CategoryHits {
+                category: c.clone(),
+                ..Default::default()
+            })
+            .collect()
+    }
+
+    /// The row of category `c` in a [`CategoryHits::table`] (which lists every category).
+    fn row<'t>(table: &'t mut [CategoryHits], c: &str) -> &'t mut CategoryHits {
+        table
+            .iter_mut()
+            .find(|e| e.category == c)
+            .expect("the table lists every category")
+    }
+
+    /// The categories its items landed nearest to instead of their own, as
+    /// "   nearest instead: Box 2, Table 1" (empty when there were none).
+    fn misses(&self) -> String {
+        let misses: Vec<String> = self
+            .nearest
+            .iter()
+            .filter(|(n, _)| **n != self.category)
+            .map(|(n, k)| format!("{n} {k}"))
+            .collect();
+        if misses.is_empty() {
+            String::new()
+        } else {
+            format!("   nearest instead: {}", misses.join(", "))
+        }
+    }
+
+    fn to_json(&self) -> serde_json::Value {
+        json!({"hits": self.hits, "objects": self.samples, "nearest": self.nearest})
+    }
+
     fn record(&mut self, nearest: &str) {
         self.samples += 1;
         if nearest == self.category {
@@ -400,19 +438,7 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
     };
     // Category accuracy: the nearest reference of a conditioned sample has its category. Each
     // entry also counts the categories the samples landed nearest to (the confusion row).
-    let mut per_cat: Vec<CategoryHits> = cats
-        .iter()
-        .map(|c| CategoryHits {
-            category: c.clone(),
-            ..Default::default()
-        })
-        .collect();
-    let entry = |per_cat: &[CategoryHits], c: &str| -> usize {
-        per_cat
-            .iter()
-            .position(|e| e.category == c)
-            .expect("known category")
-    };
+    let mut per_cat = CategoryHits::table(&cats);
     for ((c, _), row) in cond_valid.iter().zip(&d_cr) {
         let nn = row
             .iter()
@@ -420,14 +446,12 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
             .min_by(|a, b| a.1.total_cmp(b.1))
             .map(|(i, _)| i)
             .unwrap_or(0);
-        let k = entry(&per_cat, c);
-        per_cat[k].record(&cat_ref_cats[nn]);
+        CategoryHits::row(&mut per_cat, c).record(&cat_ref_cats[nn]);
     }
     // Invalid conditioned samples count as misses.
     for (c, g) in &cond {
         if invalid_reason(&g.object, &g.meshes).is_some() {
-            let k = entry(&per_cat, c);
-            per_cat[k].record("(invalid)");
+            CategoryHits::row(&mut per_cat, c).record("(invalid)");
         }
     }
     let (hits, tries) = per_cat
@@ -437,6 +461,17 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
     // The ceiling of that metric: how often a test object's nearest other test object (among
     // the category references) shares its category.
     let ref_acc = physnap::eval::generative::loo_label_accuracy(&d_cc, &cat_ref_cats);
+    // The same ceiling per category, with the categories the test objects land on instead.
+    let ref_loo: Vec<CategoryHits> = match physnap::eval::generative::loo_nearest(&d_cc) {
+        Some(nn) => {
+            let mut t = CategoryHits::table(&cats);
+            for (i, &j) in nn.iter().enumerate() {
+                CategoryHits::row(&mut t, &cat_ref_cats[i]).record(&cat_ref_cats[j]);
+            }
+            t
+        }
+        None => Vec::new(),
+    };
 
     // Reverse steps as run (0 asks for the whole schedule).
     let steps_run = if a.steps == 0 {
@@ -503,19 +538,18 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
             guidance_weight,
             guidance_below
         );
-        for e in &per_cat {
-            let misses: Vec<String> = e
-                .nearest
-                .iter()
-                .filter(|(n, _)| **n != e.category)
-                .map(|(n, k)| format!("{n} {k}"))
-                .collect();
-            let misses = if misses.is_empty() {
-                String::new()
-            } else {
-                format!("   nearest instead: {}", misses.join(", "))
-            };
-            println!("    {:<18} {}/{}{misses}", e.category, e.hits, e.samples);
+        for (k, e) in per_cat.iter().enumerate() {
+            let ceiling = ref_loo
+                .get(k)
+                .map(|r| format!("   (test set: {}/{})", r.hits, r.samples))
+                .unwrap_or_default();
+            println!(
+                "    {:<18} {}/{}{ceiling}{}",
+                e.category,
+                e.hits,
+                e.samples,
+                e.misses()
+            );
         }
     }
     if let Some(acc) = ref_acc {
@@ -523,6 +557,15 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
             "  ceiling: a test object's nearest other test object has its category {:.1}% of the time",
             100.0 * acc
         );
+        for r in ref_loo.iter().filter(|r| r.hits < r.samples) {
+            println!(
+                "    {:<18} {}/{}{}",
+                r.category,
+                r.hits,
+                r.samples,
+                r.misses()
+            );
+        }
     }
     let wall = started.elapsed().as_secs_f64();
     println!("  time: sampling+meshing {sampling_s:.0} s, ID {id_s:.0} s, total {wall:.0} s");
@@ -561,7 +604,7 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
             "accuracy": cat_acc,
             "reference_loo_accuracy": ref_acc,
             "references": cat_ref_cats.len(),
-            "categories": per_cat.iter().map(|e| json!({"category": e.category, "hits": e.hits, "samples": e.samples, "nearest": e.nearest})).collect::<Vec<_>>(),
+            "categories": per_cat.iter().enumerate().map(|(k, e)| json!({"category": e.category, "hits": e.hits, "samples": e.samples, "nearest": e.nearest, "reference_loo": ref_loo.get(k).map(CategoryHits::to_json)})).collect::<Vec<_>>(),
         },
         "seconds": { "sampling": sampling_s, "id": id_s, "total": wall },
         "command": std::env::args().collect::<Vec<_>>().join(" "),
@@ -626,7 +669,7 @@ const MAX_SURFACE_POINTS: usize = 8192;
 /// no denoiser can meet the category target with this shape prior.
 pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
     use physnap::eval::generative::{
-        loo_label_accuracy, reconstruction_hits, reconstruction_neighbours,
+        loo_label_accuracy, loo_nearest, reconstruction_hits, reconstruction_neighbours,
     };
     use physnap::eval::guided::{
         MESH_OVERLAP_DEPTH, MESH_OVERLAP_SAMPLES, mesh_overlap, positive_share as share,
@@ -807,18 +850,19 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
     let mut cats: Vec<String> = labels.clone();
     cats.sort();
     cats.dedup();
-    let per_cat: Vec<(String, usize, usize)> = cats
-        .iter()
-        .map(|c| {
-            let hits = neighbours
-                .iter()
-                .zip(&rows)
-                .filter(|&(&(other, _), &i)| &labels[i] == c && &labels[other] == c)
-                .count();
-            let all = labels.iter().filter(|l| *l == c).count();
-            (c.clone(), hits, all)
-        })
-        .collect();
+    // Per category: where the reconstructions land (objects without any surface count as
+    // misses), and where the originals land among themselves (the ceiling).
+    let mut per_cat = CategoryHits::table(&cats);
+    for (&(other, _), &i) in neighbours.iter().zip(&rows) {
+        CategoryHits::row(&mut per_cat, &labels[i]).record(&labels[other]);
+    }
+    for i in (0..total).filter(|i| !rows.contains(i)) {
+        CategoryHits::row(&mut per_cat, &labels[i]).record("(no surface)");
+    }
+    let mut orig_loo = CategoryHits::table(&cats);
+    for (i, &j) in loo_nearest(&d_oo).unwrap_or_default().iter().enumerate() {
+        CategoryHits::row(&mut orig_loo, &labels[i]).record(&labels[j]);
+    }
     let pct = |k: usize| 100.0 * k as f64 / total as f64;
     if a.shapes == "original" {
         println!(
@@ -870,8 +914,19 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
             100.0 * above(v),
         );
     }
-    for (c, h, t) in &per_cat {
-        println!("    {c:<18} {h}/{t}");
+    println!(
+        "  per category: reconstructions (originals, leave one out), then where reconstructions land instead"
+    );
+    for (e, o) in per_cat.iter().zip(&orig_loo) {
+        println!(
+            "    {:<18} {}/{} ({}/{}){}",
+            e.category,
+            e.hits,
+            e.samples,
+            o.hits,
+            o.samples,
+            e.misses()
+        );
     }
     let wall = started.elapsed().as_secs_f64();
     println!("  time: encode+mesh {mesh_s:.0} s, total {wall:.0} s");
@@ -900,7 +955,7 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
             },
             "e_pen": { "mean": mean(&physical[0]), "median": median(&physical[0]), "share": share(&physical[0]), "share_above_1e-4": above(&physical[0]) },
             "e_mob": { "mean": mean(&physical[1]), "median": median(&physical[1]), "share": share(&physical[1]), "share_above_1e-4": above(&physical[1]) },
-            "categories": per_cat.iter().map(|(c, h, t)| json!({"category": c, "hits": h, "objects": t})).collect::<Vec<_>>(),
+            "categories": per_cat.iter().zip(&orig_loo).map(|(e, o)| json!({"category": e.category, "hits": e.hits, "objects": e.samples, "nearest": e.nearest, "original_loo": o.to_json()})).collect::<Vec<_>>(),
             "seconds": { "encode_mesh": mesh_s, "total": wall },
             "command": std::env::args().collect::<Vec<_>>().join(" "),
         });

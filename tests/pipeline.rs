@@ -605,6 +605,28 @@ fn synth_import_train_generate() {
             "{c:#}"
         );
     }
+    // The ceiling per category: every test object once, the hits adding up to the pooled
+    // ceiling, each row's confusion accounting for its objects.
+    let rows = g["conditional"]["categories"].as_array().unwrap();
+    let (mut loo_hits, mut loo_objects) = (0, 0);
+    for c in rows {
+        let r = &c["reference_loo"];
+        let nearest: u64 = r["nearest"]
+            .as_object()
+            .unwrap()
+            .values()
+            .map(|n| n.as_u64().unwrap())
+            .sum();
+        assert_eq!(nearest, r["objects"].as_u64().unwrap(), "{c:#}");
+        loo_hits += r["hits"].as_u64().unwrap();
+        loo_objects += r["objects"].as_u64().unwrap();
+    }
+    assert_eq!(loo_objects as usize, test_split, "{g:#}");
+    let pooled = g["conditional"]["reference_loo_accuracy"].as_f64().unwrap();
+    assert!(
+        (loo_hits as f64 / loo_objects as f64 - pooled).abs() < 1e-12,
+        "{g:#}"
+    );
     // A `train shape` output directory is evaluated as well (a candidate before any denoiser
     // is trained on it): the same shape prior, the same figures.
     let report2 = root.path().join("shape_eval_dir.json");
@@ -680,6 +702,25 @@ fn synth_import_train_generate() {
         .map(|c| c["objects"].as_u64().unwrap())
         .sum();
     assert_eq!(per_cat as usize, test_split, "{rc:#}");
+    // Per category, where the reconstructions land and the originals' own leave-one-out
+    // ceiling, adding up to the pooled figures.
+    let (mut hits, mut loo_hits) = (0, 0);
+    for c in rc["categories"].as_array().unwrap() {
+        let landed: u64 = c["nearest"]
+            .as_object()
+            .unwrap()
+            .values()
+            .map(|n| n.as_u64().unwrap())
+            .sum();
+        assert_eq!(landed, c["objects"].as_u64().unwrap(), "{c:#}");
+        assert_eq!(c["original_loo"]["objects"], c["objects"], "{c:#}");
+        hits += c["hits"].as_u64().unwrap();
+        loo_hits += c["original_loo"]["hits"].as_u64().unwrap();
+    }
+    let close =
+        |a: u64, k: &str| (a as f64 / test_split as f64 - rc[k].as_f64().unwrap()).abs() < 1e-12;
+    assert!(close(hits, "category_accuracy"), "{rc:#}");
+    assert!(close(loo_hits, "original_loo_accuracy"), "{rc:#}");
     assert!(
         rc["id_to_original"]["mean"].as_f64().unwrap() > 0.0,
         "{rc:#}"
@@ -717,6 +758,9 @@ fn synth_import_train_generate() {
         rc["category_accuracy"], rc["original_loo_accuracy"],
         "{rc:#}"
     );
+    for c in rc["categories"].as_array().unwrap() {
+        assert_eq!(c["hits"], c["original_loo"]["hits"], "{c:#}");
+    }
     // `--shapes analytic`: the originals' primitives meshed like decoded shapes.
     let out = reconstruct(&["--shapes", "analytic", "--resolution", "16"]);
     assert!(out.contains("category accuracy"), "{out}");

@@ -513,25 +513,41 @@ pub fn invalid_reason(obj: &ArticulatedObject, meshes: &[TriMesh]) -> Option<Str
     None
 }
 
+/// Leave-one-out nearest neighbours over a symmetric distance matrix: for each object, the
+/// index of its nearest *other* object (the first on ties). None below two objects or when
+/// `d` is not square.
+pub fn loo_nearest(d: &[Vec<f64>]) -> Option<Vec<usize>> {
+    let n = d.len();
+    if n < 2 || d.iter().any(|row| row.len() != n) {
+        return None;
+    }
+    Some(
+        (0..n)
+            .map(|i| {
+                (0..n)
+                    .filter(|&j| j != i)
+                    .min_by(|&a, &b| d[i][a].total_cmp(&d[i][b]))
+                    .expect("n >= 2")
+            })
+            .collect(),
+    )
+}
+
 /// Leave-one-out nearest-neighbour label accuracy over a symmetric distance matrix: for each
 /// object, does its nearest *other* object carry the same label? Run on the reference set
 /// itself, it is the ceiling of the category-accuracy metric (a conditioned sample can only be
 /// classified as well as the references separate their categories). None below two objects.
 pub fn loo_label_accuracy(d: &[Vec<f64>], labels: &[String]) -> Option<f64> {
-    let n = labels.len();
-    if n < 2 || d.len() != n {
+    if labels.len() != d.len() {
         return None;
     }
-    let hits = (0..n)
-        .filter(|&i| {
-            let nn = (0..n)
-                .filter(|&j| j != i)
-                .min_by(|&a, &b| d[i][a].total_cmp(&d[i][b]))
-                .expect("n >= 2");
-            labels[nn] == labels[i]
-        })
+    let nn = loo_nearest(d)?;
+    let hits = nn
+        .iter()
+        .enumerate()
+        .filter(|&(i, &j)| labels[j] == labels[i])
         .count();
-    Some(hits as f64 / n as f64)
+    Some(hits as f64 / labels.len() as f64)
 }
 
 /// For each reconstruction row `r` (of original object `rows[r]`; `d[r]` holds its IDs to
@@ -634,8 +650,10 @@ mod tests {
             .map(|x: &f64| pos.iter().map(|y| (x - y).abs()).collect())
             .collect();
         let labels: Vec<String> = ["a", "a", "b", "b", "a"].map(String::from).to_vec();
+        assert_eq!(loo_nearest(&d), Some(vec![1, 0, 3, 4, 3]));
         assert_eq!(loo_label_accuracy(&d, &labels), Some(0.8));
         assert_eq!(loo_label_accuracy(&d[..1], &labels[..1]), None);
+        assert_eq!(loo_label_accuracy(&d, &labels[..4]), None);
     }
 
     fn cloud(pts: &[[f32; 3]]) -> Cloud {

@@ -244,6 +244,19 @@ impl CategoryHits {
         }
     }
 
+    /// The leave-one-out table of a labelled set with distance matrix `d`: per category, how
+    /// many of its objects have an object of their own category nearest, and which they have
+    /// instead. Every row is empty when `d` holds fewer than two objects or does not fit
+    /// `labels`.
+    fn leave_one_out(cats: &[String], labels: &[String], d: &[Vec<f64>]) -> Vec<CategoryHits> {
+        let mut t = CategoryHits::table(cats);
+        let nn = physnap::eval::generative::loo_nearest(d).filter(|nn| nn.len() == labels.len());
+        for (i, &j) in nn.iter().flatten().enumerate() {
+            CategoryHits::row(&mut t, &labels[i]).record(&labels[j]);
+        }
+        t
+    }
+
     fn to_json(&self) -> serde_json::Value {
         json!({"hits": self.hits, "objects": self.samples, "nearest": self.nearest})
     }
@@ -462,16 +475,7 @@ pub fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {
     // the category references) shares its category.
     let ref_acc = physnap::eval::generative::loo_label_accuracy(&d_cc, &cat_ref_cats);
     // The same ceiling per category, with the categories the test objects land on instead.
-    let ref_loo: Vec<CategoryHits> = match physnap::eval::generative::loo_nearest(&d_cc) {
-        Some(nn) => {
-            let mut t = CategoryHits::table(&cats);
-            for (i, &j) in nn.iter().enumerate() {
-                CategoryHits::row(&mut t, &cat_ref_cats[i]).record(&cat_ref_cats[j]);
-            }
-            t
-        }
-        None => Vec::new(),
-    };
+    let ref_loo = CategoryHits::leave_one_out(&cats, &cat_ref_cats, &d_cc);
 
     // Reverse steps as run (0 asks for the whole schedule).
     let steps_run = if a.steps == 0 {
@@ -669,7 +673,7 @@ const MAX_SURFACE_POINTS: usize = 8192;
 /// no denoiser can meet the category target with this shape prior.
 pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
     use physnap::eval::generative::{
-        loo_label_accuracy, loo_nearest, reconstruction_hits, reconstruction_neighbours,
+        loo_label_accuracy, reconstruction_hits, reconstruction_neighbours,
     };
     use physnap::eval::guided::{
         MESH_OVERLAP_DEPTH, MESH_OVERLAP_SAMPLES, mesh_overlap, positive_share as share,
@@ -859,10 +863,7 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
     for i in (0..total).filter(|i| !rows.contains(i)) {
         CategoryHits::row(&mut per_cat, &labels[i]).record("(no surface)");
     }
-    let mut orig_loo = CategoryHits::table(&cats);
-    for (i, &j) in loo_nearest(&d_oo).unwrap_or_default().iter().enumerate() {
-        CategoryHits::row(&mut orig_loo, &labels[i]).record(&labels[j]);
-    }
+    let orig_loo = CategoryHits::leave_one_out(&cats, &labels, &d_oo);
     let pct = |k: usize| 100.0 * k as f64 / total as f64;
     if a.shapes == "original" {
         println!(

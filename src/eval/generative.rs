@@ -650,7 +650,7 @@ mod tests {
             .map(|x: &f64| pos.iter().map(|y| (x - y).abs()).collect())
             .collect();
         let labels: Vec<String> = ["a", "a", "b", "b", "a"].map(String::from).to_vec();
-        assert_eq!(loo_nearest(&d), Some(vec![1, 0, 3, 4, 3]));
+        assert_eq!(loo_nearest(&d), Some(vec![1, 0, 3, 2, 3]));
         assert_eq!(loo_label_accuracy(&d, &labels), Some(0.8));
         assert_eq!(loo_label_accuracy(&d[..1], &labels[..1]), None);
         assert_eq!(loo_label_accuracy(&d, &labels[..4]), None);

@@ -376,6 +376,11 @@ struct ShapeArgs {
     /// stays what it was and a denoiser trained on those codes stays valid.
     #[arg(long, env = "PHYSNAP_SHAPE_FREEZE_ENCODER")]
     freeze_encoder: bool,
+    /// Keep the decoder fixed (needs --init-from; not with --freeze-encoder): only the encoder
+    /// trains, towards the codes the decoder decodes best. Every code changes, so a denoiser
+    /// must be trained on the new ones.
+    #[arg(long, env = "PHYSNAP_SHAPE_FREEZE_DECODER")]
+    freeze_decoder: bool,
     /// Evaluate val IoU every this many steps (0: only at the end).
     #[arg(long, env = "PHYSNAP_SHAPE_EVAL_EVERY", default_value_t = 1000)]
     eval_every: usize,

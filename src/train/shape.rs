@@ -82,7 +82,7 @@ pub const EMA_CHECKPOINT_FILE: &str = "shape_prior_ema.checkpoint.safetensors";
 /// The config fields a resumed run must share with its checkpoint (they define the run's
 /// batches, schedule and model); the others (threads, evaluation, checkpointing, the decoder's
 /// backward implementation) may change between pieces.
-const RESUME_FIELDS: [&str; 15] = [
+const RESUME_FIELDS: [&str; 16] = [
     "model",
     "max_parts",
     "steps",
@@ -98,6 +98,7 @@ const RESUME_FIELDS: [&str; 15] = [
     "seed",
     "ema_decay",
     "freeze_encoder",
+    "freeze_decoder",
 ];
 /// Largest number of validation parts evaluated.
 pub const MAX_VAL_PARTS: usize = 64;
@@ -167,6 +168,10 @@ pub struct ShapeTrainConfig {
     /// Keep the encoder's weights fixed (needs `init_from`): only the decoder trains, so every
     /// part's code, and with it a denoiser trained on those codes, stays valid.
     pub freeze_encoder: bool,
+    /// Keep the decoder's weights fixed (needs `init_from`): only the encoder trains, towards
+    /// the codes the decoder decodes best. Every code changes, so a denoiser must be trained
+    /// on the new ones; the decoder, and with it guidance and meshing of given codes, stays.
+    pub freeze_decoder: bool,
     /// Weight of the eikonal term on the near-surface queries ([`eikonal_term`]; 0: off, as
     /// NAP). It asks the decoder for a field of slope 1, a signed distance, instead of the
     /// flatter field an L1 fit leaves (slope 0.3–0.5 on the shipped prior's surfaces, which
@@ -232,6 +237,7 @@ impl Default for ShapeTrainConfig {
             compute: Compute::Cpu,
             init_from: None,
             freeze_encoder: false,
+            freeze_decoder: false,
             eikonal: 0.0,
             batch_shards: 2,
         }
@@ -313,6 +319,20 @@ impl ShapeTrainConfig {
                 "true without init_from",
             ));
         }
+        if self.freeze_decoder && self.init_from.is_none() {
+            return Err(TrainError::config(
+                "freeze_decoder",
+                "init_from set (an encoder trained against a random decoder learns nothing)",
+                "true without init_from",
+            ));
+        }
+        if self.freeze_decoder && self.freeze_encoder {
+            return Err(TrainError::config(
+                "freeze_decoder",
+                "false while freeze_encoder is set (with both frozen nothing trains)",
+                "true with freeze_encoder",
+            ));
+        }
         if !(self.eikonal.is_finite() && (0.0..=100.0).contains(&self.eikonal)) {
             return Err(TrainError::config(
                 "eikonal",
@@ -385,6 +405,7 @@ impl ShapeTrainConfig {
             "checkpoint_every": self.checkpoint_every,
             "init_from": self.init_from.as_ref().map(|p| p.display().to_string()),
             "freeze_encoder": self.freeze_encoder,
+            "freeze_decoder": self.freeze_decoder,
             "eikonal": self.eikonal,
             "batch_shards": self.batch_shards,
         })
@@ -2036,6 +2057,14 @@ fn run(
         model.encoder = model.encoder.no_grad();
         trainer.model = Some(model);
     }
+    if cfg.freeze_decoder {
+        let mut model = trainer
+            .model
+            .take()
+            .expect("model is present between steps");
+        model.decoder = model.decoder.no_grad();
+        trainer.model = Some(model);
+    }
     let end = cfg.stop_at.unwrap_or(cfg.steps).max(start);
     let t_train = Instant::now();
     for step in start..end {
@@ -2411,6 +2440,77 @@ mod tests {
             e.contains("freeze_encoder") && e.contains("init_from"),
             "{e}"
         );
+    }
+
+    /// `init_from` + `freeze_decoder` trains the encoder only: the decoder's field is the
+    /// same function, every code moves; freezing both, or a random decoder, is refused.
+    #[test]
+    fn freeze_decoder_trains_the_encoder_and_keeps_the_field() {
+        let data = tiny_dataset(13);
+        let train = data.path().join("train");
+        let short = ShapeTrainConfig {
+            steps: 10,
+            eval_every: 0,
+            ..tiny_config()
+        };
+        let base = data.path().join("base");
+        train_shape(&train, &short, &base, &mut |_| {}).unwrap();
+        let cfg = ShapeTrainConfig {
+            init_from: Some(base.join(WEIGHTS_FILE)),
+            freeze_decoder: true,
+            seed: 1,
+            ..short.clone()
+        };
+        let frozen = data.path().join("frozen");
+        train_shape(&train, &cfg, &frozen, &mut |_| {}).unwrap();
+        let read = |dir: &Path, f: &str| std::fs::read(dir.join(f)).unwrap();
+        assert_ne!(read(&base, CODEBOOK_FILE), read(&frozen, CODEBOOK_FILE));
+        // The same field for the same points and codes, bit for bit.
+        let device = cpu();
+        let field = |dir: &Path| -> Vec<f32> {
+            let (model, cfg, _) = load_shape_dir(dir, &device).unwrap();
+            let pts: Vec<f32> = (0..3 * 50)
+                .map(|i| ((i * 37 % 101) as f32 / 101.0) - 0.5)
+                .collect();
+            let codes: Vec<f32> = (0..2 * cfg.latent)
+                .map(|i| ((i * 13 % 29) as f32 / 29.0) - 0.5)
+                .collect();
+            model
+                .decoder
+                .sdf(
+                    Tensor::<3>::from_data(TensorData::new(pts.repeat(2), [2, 50, 3]), &device),
+                    Tensor::<2>::from_data(TensorData::new(codes, [2, cfg.latent]), &device),
+                )
+                .into_data()
+                .try_to_vec::<f32>()
+                .unwrap()
+        };
+        let (a, b) = (field(&base), field(&frozen));
+        assert!(
+            a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()),
+            "{a:?} {b:?}"
+        );
+        for (cfg, expect) in [
+            (
+                ShapeTrainConfig {
+                    freeze_decoder: true,
+                    ..short.clone()
+                },
+                "init_from",
+            ),
+            (
+                ShapeTrainConfig {
+                    freeze_decoder: true,
+                    freeze_encoder: true,
+                    init_from: Some(base.join(WEIGHTS_FILE)),
+                    ..short.clone()
+                },
+                "nothing trains",
+            ),
+        ] {
+            let e = cfg.validate().unwrap_err().to_string();
+            assert!(e.contains("freeze_decoder") && e.contains(expect), "{e}");
+        }
     }
 
     #[test]

@@ -47,6 +47,16 @@ fn strs(args: &[String]) -> Vec<&str> {
     args.iter().map(String::as_str).collect()
 }
 
+/// The sum of a JSON object of counts (a report's `nearest` row).
+fn count_sum(counts: &serde_json::Value) -> u64 {
+    counts
+        .as_object()
+        .expect("an object of counts")
+        .values()
+        .map(|n| n.as_u64().expect("a count"))
+        .sum()
+}
+
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
@@ -595,10 +605,12 @@ fn synth_import_train_generate() {
     assert!((0.0..=1.0).contains(&acc), "{g:#}");
     // Each category's confusion row accounts for every sample, its own count for the hits.
     for c in g["conditional"]["categories"].as_array().unwrap() {
-        let nearest = c["nearest"].as_object().unwrap();
-        let total: u64 = nearest.values().map(|n| n.as_u64().unwrap()).sum();
-        assert_eq!(total, c["samples"].as_u64().unwrap(), "{c:#}");
-        let own = nearest.get(c["category"].as_str().unwrap());
+        assert_eq!(
+            count_sum(&c["nearest"]),
+            c["samples"].as_u64().unwrap(),
+            "{c:#}"
+        );
+        let own = c["nearest"].get(c["category"].as_str().unwrap());
         assert_eq!(
             own.map_or(0, |n| n.as_u64().unwrap()),
             c["hits"].as_u64().unwrap(),
@@ -611,13 +623,11 @@ fn synth_import_train_generate() {
     let (mut loo_hits, mut loo_objects) = (0, 0);
     for c in rows {
         let r = &c["reference_loo"];
-        let nearest: u64 = r["nearest"]
-            .as_object()
-            .unwrap()
-            .values()
-            .map(|n| n.as_u64().unwrap())
-            .sum();
-        assert_eq!(nearest, r["objects"].as_u64().unwrap(), "{c:#}");
+        assert_eq!(
+            count_sum(&r["nearest"]),
+            r["objects"].as_u64().unwrap(),
+            "{c:#}"
+        );
         loo_hits += r["hits"].as_u64().unwrap();
         loo_objects += r["objects"].as_u64().unwrap();
     }
@@ -706,13 +716,11 @@ fn synth_import_train_generate() {
     // ceiling, adding up to the pooled figures.
     let (mut hits, mut loo_hits) = (0, 0);
     for c in rc["categories"].as_array().unwrap() {
-        let landed: u64 = c["nearest"]
-            .as_object()
-            .unwrap()
-            .values()
-            .map(|n| n.as_u64().unwrap())
-            .sum();
-        assert_eq!(landed, c["objects"].as_u64().unwrap(), "{c:#}");
+        assert_eq!(
+            count_sum(&c["nearest"]),
+            c["objects"].as_u64().unwrap(),
+            "{c:#}"
+        );
         assert_eq!(c["original_loo"]["objects"], c["objects"], "{c:#}");
         hits += c["hits"].as_u64().unwrap();
         loo_hits += c["original_loo"]["hits"].as_u64().unwrap();

@@ -2049,20 +2049,17 @@ fn run(
         (losses, curve, train_s, elapsed_before, start) =
             (c.losses, c.curve, c.train_s, c.elapsed_s, c.step);
     }
-    if cfg.freeze_encoder {
+    if cfg.freeze_encoder || cfg.freeze_decoder {
         let mut model = trainer
             .model
             .take()
             .expect("model is present between steps");
-        model.encoder = model.encoder.no_grad();
-        trainer.model = Some(model);
-    }
-    if cfg.freeze_decoder {
-        let mut model = trainer
-            .model
-            .take()
-            .expect("model is present between steps");
-        model.decoder = model.decoder.no_grad();
+        if cfg.freeze_encoder {
+            model.encoder = model.encoder.no_grad();
+        }
+        if cfg.freeze_decoder {
+            model.decoder = model.decoder.no_grad();
+        }
         trainer.model = Some(model);
     }
     let end = cfg.stop_at.unwrap_or(cfg.steps).max(start);
@@ -2351,10 +2348,10 @@ mod tests {
         );
     }
 
-    /// `init_from` + `freeze_encoder` trains the decoder only: the codes stay byte-identical.
-    #[test]
-    fn freeze_encoder_trains_the_decoder_and_keeps_every_code() {
-        let data = tiny_dataset(12);
+    /// A tiny data set of `objects` objects and a 10-step prior trained on it, for the
+    /// continued-training tests: (the data, its `train` import, the 10-step config, the prior).
+    fn ten_step_prior(objects: usize) -> (tempfile::TempDir, PathBuf, ShapeTrainConfig, PathBuf) {
+        let data = tiny_dataset(objects);
         let train = data.path().join("train");
         let short = ShapeTrainConfig {
             steps: 10,
@@ -2363,6 +2360,13 @@ mod tests {
         };
         let base = data.path().join("base");
         train_shape(&train, &short, &base, &mut |_| {}).unwrap();
+        (data, train, short, base)
+    }
+
+    /// `init_from` + `freeze_encoder` trains the decoder only: the codes stay byte-identical.
+    #[test]
+    fn freeze_encoder_trains_the_decoder_and_keeps_every_code() {
+        let (data, train, short, base) = ten_step_prior(12);
         let continued = |out: &str, freeze_encoder: bool| {
             let cfg = ShapeTrainConfig {
                 init_from: Some(base.join(WEIGHTS_FILE)),
@@ -2446,15 +2450,7 @@ mod tests {
     /// same function, every code moves; freezing both, or a random decoder, is refused.
     #[test]
     fn freeze_decoder_trains_the_encoder_and_keeps_the_field() {
-        let data = tiny_dataset(13);
-        let train = data.path().join("train");
-        let short = ShapeTrainConfig {
-            steps: 10,
-            eval_every: 0,
-            ..tiny_config()
-        };
-        let base = data.path().join("base");
-        train_shape(&train, &short, &base, &mut |_| {}).unwrap();
+        let (data, train, short, base) = ten_step_prior(13);
         let cfg = ShapeTrainConfig {
             init_from: Some(base.join(WEIGHTS_FILE)),
             freeze_decoder: true,

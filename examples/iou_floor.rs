@@ -14,18 +14,12 @@
 
 use physnap::PartShape;
 use physnap::Sdf;
+use physnap::mesh::DOMAIN_HALF;
 use physnap::shape::AnalyticSdf;
-
-const DOMAIN_HALF: f64 = 0.55;
+use physnap::train::shape::{iou_grid, occupancy_iou};
 
 fn iou(a: &[bool], b: &[bool]) -> f64 {
-    let inter = a.iter().zip(b).filter(|(x, y)| **x && **y).count();
-    let union = a.iter().zip(b).filter(|(x, y)| **x || **y).count();
-    if union == 0 {
-        1.0
-    } else {
-        inter as f64 / union as f64
-    }
+    occupancy_iou(a.iter().copied().zip(b.iter().copied()))
 }
 
 fn main() {
@@ -38,16 +32,8 @@ fn main() {
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&args[2]).expect("report")).expect("json");
     let res: usize = args.get(3).map(|s| s.parse().expect("RES")).unwrap_or(64);
-    let cell = 2.0 * DOMAIN_HALF / res as f64;
-    let centre = |i: usize| -DOMAIN_HALF + cell * (i as f64 + 0.5);
-    let mut grid = Vec::with_capacity(res * res * res);
-    for k in 0..res {
-        for j in 0..res {
-            for i in 0..res {
-                grid.push([centre(i), centre(j), centre(k)]);
-            }
-        }
-    }
+    let cell = 2.0 * DOMAIN_HALF as f64 / res as f64;
+    let grid = iou_grid(res);
     // Perturbations, in cells: a shift along a fixed oblique direction, and surface offsets.
     let dir = {
         let d = [0.36f64, 0.48, 0.80];
@@ -103,7 +89,7 @@ fn main() {
         let field = |offset: [f64; 3]| -> Vec<f32> {
             let pts: Vec<[f32; 3]> = grid
                 .iter()
-                .map(|p| std::array::from_fn(|a| (p[a] - offset[a]) as f32))
+                .map(|p| std::array::from_fn(|a| (p[a] as f64 - offset[a]) as f32))
                 .collect();
             let mut out = vec![0.0f32; pts.len()];
             sdf.eval_batch(&pts, &mut out);

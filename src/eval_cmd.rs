@@ -860,7 +860,7 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
     for (&(other, _), &i) in neighbours.iter().zip(&rows) {
         CategoryHits::row(&mut per_cat, &labels[i]).record(&labels[other]);
     }
-    for i in (0..total).filter(|i| !rows.contains(i)) {
+    for i in (0..total).filter(|&i| recs[i].2.is_err()) {
         CategoryHits::row(&mut per_cat, &labels[i]).record("(no surface)");
     }
     let orig_loo = CategoryHits::leave_one_out(&cats, &labels, &d_oo);

@@ -647,8 +647,9 @@ fn first_points(surface: &[f32], n: usize) -> Vec<f32> {
         .collect()
 }
 
-/// Cell-centre grid over [−0.55, 0.55]³, x fastest.
-fn iou_grid(res: usize) -> Vec<[f32; 3]> {
+/// Cell-centre grid over [−0.55, 0.55]³, x fastest: where `eval shape` samples both
+/// occupancies of its IoU.
+pub fn iou_grid(res: usize) -> Vec<[f32; 3]> {
     let h = DOMAIN_HALF as f64;
     let c = |i: usize| (-h + 2.0 * h * (i as f64 + 0.5) / res as f64) as f32;
     let mut g = Vec::with_capacity(res * res * res);
@@ -846,21 +847,29 @@ fn evaluate(
     let mut idx = vec![0; n];
     let mut ious = Vec::with_capacity(v);
     for (i, part) in val.iter().enumerate() {
-        let (mut inter, mut union) = (0usize, 0usize);
         idx.fill(i);
         host.eval(&grid, &features, &idx, &mut d);
-        for (dv, &gt) in d.iter().zip(&part.occupancy) {
-            let occ = *dv < 0.0;
-            inter += (occ && gt) as usize;
-            union += (occ || gt) as usize;
-        }
-        ious.push(if union == 0 {
-            1.0
-        } else {
-            inter as f64 / union as f64
-        });
+        ious.push(occupancy_iou(
+            d.iter()
+                .zip(&part.occupancy)
+                .map(|(dv, &gt)| (*dv < 0.0, gt)),
+        ));
     }
     (ious, l1)
+}
+
+/// IoU of two occupancies given as (a, b) pairs per grid point; 1 when both are empty.
+pub fn occupancy_iou(pairs: impl Iterator<Item = (bool, bool)>) -> f64 {
+    let (mut inter, mut union) = (0usize, 0usize);
+    for (a, b) in pairs {
+        inter += (a && b) as usize;
+        union += (a || b) as usize;
+    }
+    if union == 0 {
+        1.0
+    } else {
+        inter as f64 / union as f64
+    }
 }
 
 /// The val parts a run evaluates: `cfg.val_parts` spread evenly over the val split.

@@ -680,7 +680,7 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
         sdf_metrics, share_above,
     };
     use physnap::graph::{GraphTensor, ProjectOptions, node_ch, project};
-    use physnap::train::shape::encode_object_parts;
+    use physnap::train::shape::{Encoding, encode_object_parts};
     let started = Instant::now();
     let id = IdOptions {
         states: a.states,
@@ -696,6 +696,7 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
         physnap::train::shape::ShapeTrainConfig::default().surface_points,
         |n| n as usize,
     );
+    let encoding = Encoding::of_report(&report, &a.weights)?;
     let decoder = LatentSdfDecoder::new(&prior.decoder);
     let n = if a.objects == 0 {
         usize::MAX
@@ -735,8 +736,14 @@ pub fn reconstruction(a: EvalReconstructionArgs) -> anyhow::Result<()> {
                 .with_context(|| format!("reading {}", graph_path.display()))?;
             let mut g = GraphTensor::from_flat(&flat)
                 .with_context(|| format!("{}", graph_path.display()))?;
-            let codes =
-                encode_object_parts(&prior, &a.data, oid, orig.parts.len(), surface_points)?;
+            let codes = encode_object_parts(
+                &prior,
+                &a.data,
+                oid,
+                orig.parts.len(),
+                surface_points,
+                &encoding,
+            )?;
             // Slot k holds part k (the codebook's key `<id>_<k>`, as `train diffusion` reads it).
             for slot in 0..physnap::graph::K {
                 if g.node(slot)[node_ch::EXIST] >= 0.5 {
@@ -989,7 +996,7 @@ fn load_any_shape_prior(
 
 /// `physnap eval shape`: IoU of the weights' shape prior on parts of one split.
 pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
-    use physnap::train::shape::{PartIou, ShapeTrainConfig, evaluate_shape_prior};
+    use physnap::train::shape::{Encoding, PartIou, ShapeTrainConfig, evaluate_shape_prior};
     let started = Instant::now();
     if !["train", "val", "test"].contains(&a.split.as_str()) {
         bail!("invalid --split {:?} (must be train, val or test)", a.split);
@@ -1007,13 +1014,6 @@ pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
             a.weights.display()
         );
     }
-    if a.write_manifest && a.fit_codes > 0 {
-        bail!(
-            "--write-manifest records the encoder's IoU, the target's; --fit-codes {} measures \
-             the decoder with fitted codes instead (keep it with --out)",
-            a.fit_codes
-        );
-    }
     if let Some(n) = a.surface_points
         && !(1..=MAX_SURFACE_POINTS).contains(&n)
     {
@@ -1026,6 +1026,31 @@ pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
         );
     }
     let (shape_prior, model_cfg, report) = load_any_shape_prior(&a.weights)?;
+    // The codebook's encoding is the default; another one measures codes the denoiser never
+    // learned, which the manifest must not record as the prior's IoU.
+    let recorded = Encoding::of_report(&report, &a.weights)?;
+    let enc = Encoding {
+        views: a.encoder_views.unwrap_or(recorded.views),
+        fit_steps: a.fit_codes.unwrap_or(recorded.fit_steps),
+        fit_queries: a.fit_queries.unwrap_or(recorded.fit_queries),
+    };
+    enc.validate()?;
+    if a.write_manifest && enc != recorded {
+        let differs = [
+            ("--encoder-views", enc.views, recorded.views),
+            ("--fit-codes", enc.fit_steps, recorded.fit_steps),
+            ("--fit-queries", enc.fit_queries, recorded.fit_queries),
+        ]
+        .iter()
+        .filter(|(_, asked, rec)| asked != rec)
+        .map(|(flag, asked, rec)| format!("{flag} {asked} (the codebook's: {rec})"))
+        .collect::<Vec<_>>()
+        .join(", ");
+        bail!(
+            "--write-manifest records the IoU of the codes the codebook uses, which the denoiser \
+             learned; {differs} measures other codes (keep that report with --out)"
+        );
+    }
     let defaults = ShapeTrainConfig::default();
     let trained_points = report["config"]["surface_points"]
         .as_u64()
@@ -1044,7 +1069,7 @@ pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
         &cfg,
         &a.split,
         a.parts,
-        a.fit_codes,
+        &enc,
         &mut |done, total| {
             pb.set_length(total as u64);
             pb.set_position(done as u64);
@@ -1094,10 +1119,22 @@ pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
         }
     }
     println!("  mean SDF L1 {l1:.5} (normalised units)");
-    if a.fit_codes > 0 {
+    if enc.views > 1 {
         println!(
-            "  codes fitted to each part's samples ({} Adam steps, decoder frozen), not encoded",
-            a.fit_codes
+            "  codes: the mean of {} encoder calls a part, each on the next {surface_points} surface points",
+            enc.views
+        );
+    }
+    if enc.fit_steps > 0 {
+        println!(
+            "  codes fitted to each part's first {} SDF samples ({} Adam steps from the encoder's, decoder frozen)",
+            enc.fit_queries, enc.fit_steps
+        );
+    }
+    if enc != recorded {
+        println!(
+            "  (the codebook's encoding is {} view(s), {} fitting steps: these are not the codes the denoiser learned)",
+            recorded.views, recorded.fit_steps
         );
     }
     if surface_points != trained_points {
@@ -1113,7 +1150,8 @@ pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
         "resolution": a.resolution,
         "mean_iou": mean(&all),
         "l1": l1,
-        "fit_codes": a.fit_codes,
+        "fit_codes": enc.fit_steps,
+        "encoding": enc.to_json(),
         "groups": groups.iter().map(|(name, sel)| json!({
             "name": name, "parts": sel.len(), "mean_iou": mean(sel),
         })).collect::<Vec<_>>(),

@@ -195,10 +195,18 @@ struct EvalShapeArgs {
     #[arg(long, env = "PHYSNAP_EVAL_WRITE_MANIFEST")]
     write_manifest: bool,
     /// Fit each part's code to its SDF samples for this many Adam steps, decoder frozen
-    /// (DeepSDF's auto-decoder inference), before measuring: the decoder's IoU apart from the
-    /// encoder's. 0 (default): the encoder's codes, as the codebook and the target use.
-    #[arg(long, env = "PHYSNAP_EVAL_FIT_CODES", default_value_t = 0)]
-    fit_codes: usize,
+    /// (DeepSDF's auto-decoder inference), before measuring. Default: the encoding the
+    /// weights' codebook was made with (`train encode --fit-steps`; 0 for NAP's); another
+    /// count measures the decoder with other codes than the denoiser learns.
+    #[arg(long, env = "PHYSNAP_EVAL_FIT_CODES")]
+    fit_codes: Option<usize>,
+    /// Encoder calls per part whose codes are averaged. Default: the codebook's encoding
+    /// (`train encode --encoder-views`; 1 for NAP's).
+    #[arg(long, env = "PHYSNAP_EVAL_ENCODER_VIEWS")]
+    encoder_views: Option<usize>,
+    /// SDF samples per part a fit uses. Default: the codebook's encoding (2048 for NAP's).
+    #[arg(long, env = "PHYSNAP_EVAL_FIT_QUERIES")]
+    fit_queries: Option<usize>,
     /// Encoder input: the first N surface points of each part (cycled when a part has fewer).
     /// Default: the count the prior was trained with, which the codebook and so the denoiser
     /// use; another count measures what the encoder makes of more or fewer points.
@@ -315,7 +323,8 @@ struct InstallShapeArgs {
 
 #[derive(Args, Debug)]
 struct EncodeArgs {
-    /// Weights directory whose shape prior to use (manifest.json + shape_prior.safetensors).
+    /// Weights directory whose shape prior to use (manifest.json + shape_prior.safetensors),
+    /// or a `train shape` output directory (shape_train.json + shape_prior.safetensors).
     #[arg(long, env = "PHYSNAP_WEIGHTS")]
     weights: PathBuf,
     /// Imported data set to encode (output of `physnap data import`).
@@ -324,6 +333,17 @@ struct EncodeArgs {
     /// Output shape directory (shape_prior.safetensors, shape_train.json, codebook.npy/json).
     #[arg(long, env = "PHYSNAP_OUT")]
     out: PathBuf,
+    /// Encoder calls per part, each on the next block of surface points (as many as the prior
+    /// was trained with); a part's code is their mean. 1: NAP's single call.
+    #[arg(long, env = "PHYSNAP_ENCODER_VIEWS", default_value_t = 1)]
+    encoder_views: usize,
+    /// Then fit each code to its part's SDF samples for this many Adam steps, decoder frozen
+    /// (DeepSDF's auto-decoder inference from the encoder's code). 0: the encoder's code.
+    #[arg(long, env = "PHYSNAP_FIT_STEPS", default_value_t = 0)]
+    fit_steps: usize,
+    /// SDF samples per part the fit uses (half uniform, half near-surface; even).
+    #[arg(long, env = "PHYSNAP_FIT_QUERIES", default_value_t = 2048)]
+    fit_queries: usize,
 }
 
 #[derive(Args, Debug)]

@@ -29,8 +29,8 @@ use physnap::train::codebook::{
 };
 use physnap::train::diffusion::{DiffusionTrainConfig, load_data, train_diffusion};
 use physnap::train::shape::{
-    DecoderBackward, ShapeTrainConfig, encode_shape_dir, load_shape_prior, model_config_of,
-    read_model_config, train_shape, write_atomic,
+    DecoderBackward, Encoding, ShapeTrainConfig, encode_shape_dir, load_shape_prior,
+    model_config_of, read_model_config, train_shape, write_atomic,
 };
 
 use super::{
@@ -152,21 +152,56 @@ fn manifest_with_shape_prior(weights: &Path) -> anyhow::Result<(Manifest, PathBu
 }
 
 pub fn encode(a: EncodeArgs) -> anyhow::Result<()> {
-    let (manifest, path, file) = manifest_with_shape_prior(&a.weights)?;
-    let report = &manifest.training["shape"];
+    // A weights directory (its manifest's training.shape report), or a `train shape` output
+    // directory (its shape_train.json), e.g. a decoder cycle's, before any denoiser exists.
+    let shape_report = a.weights.join("shape_train.json");
+    let (report, path, file) =
+        if !a.weights.join("manifest.json").is_file() && shape_report.is_file() {
+            let text = std::fs::read_to_string(&shape_report)
+                .with_context(|| format!("reading {}", shape_report.display()))?;
+            let report: serde_json::Value = serde_json::from_str(&text)
+                .with_context(|| format!("parsing {}", shape_report.display()))?;
+            let file = a.weights.join(physnap::train::shape::WEIGHTS_FILE);
+            (report, shape_report, file)
+        } else {
+            let (manifest, path, file) = manifest_with_shape_prior(&a.weights)?;
+            (manifest.training["shape"].clone(), path, file)
+        };
+    let report = &report;
     if !report.is_object() {
         bail!(
             "{}: no training.shape report (the shape prior's shape_train.json), which holds the encoder input size",
             path.display()
         );
     }
+    let encoding = Encoding {
+        views: a.encoder_views,
+        fit_steps: a.fit_steps,
+        fit_queries: a.fit_queries,
+    };
+    encoding.validate()?;
     let t = std::time::Instant::now();
-    let enc = encode_shape_dir(&file, report, &a.data, &a.out)?;
+    let pb = super::progress_bar(0, "parts");
+    let enc = encode_shape_dir(
+        &file,
+        report,
+        &a.data,
+        &a.out,
+        &encoding,
+        &mut |done, total| {
+            pb.set_length(total as u64);
+            pb.set_position(done as u64);
+        },
+    )?;
+    pb.finish_and_clear();
     println!(
-        "encoded {} parts of {} ({} surface points each) with {} in {:.0} s; shape directory: {}",
+        "encoded {} parts of {} ({} surface points a view, {} view(s), {} fitting steps on {} samples) with {} in {:.0} s; shape directory: {}",
         enc.rows,
         a.data.display(),
         enc.surface_points,
+        encoding.views,
+        encoding.fit_steps,
+        encoding.fit_queries,
         file.display(),
         t.elapsed().as_secs_f64(),
         a.out.display()

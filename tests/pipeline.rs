@@ -436,6 +436,72 @@ fn synth_import_train_generate() {
         );
     }
 
+    // `train encode` also reads a `train shape` directory, and makes codes by another
+    // encoding (views averaged, then fitted), which its report records and `eval shape` then
+    // measures by default; a bad count is refused by field, limit and value.
+    let fitted_dir = root.path().join("shape_fitted");
+    let encode_fitted = |extra: &[&str]| {
+        let mut args = vec![
+            "train",
+            "encode",
+            "--weights",
+            s(&shape),
+            "--data",
+            s(&data),
+            "--out",
+            s(&fitted_dir),
+        ];
+        args.extend_from_slice(extra);
+        physnap(&args)
+    };
+    let o = encode_fitted(&[
+        "--encoder-views",
+        "2",
+        "--fit-steps",
+        "3",
+        "--fit-queries",
+        "64",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.contains("2 view(s), 3 fitting steps on 64 samples"),
+        "{out}"
+    );
+    assert_ne!(
+        std::fs::read(shape.join("codebook.npy")).unwrap(),
+        std::fs::read(fitted_dir.join("codebook.npy")).unwrap()
+    );
+    let rep: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(fitted_dir.join("shape_train.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(rep["encoding"]["views"], 2);
+    assert_eq!(rep["encoding"]["fit_steps"], 3);
+    let shape_out = ok(&[
+        "eval",
+        "shape",
+        "--weights",
+        s(&fitted_dir),
+        "--data",
+        s(&data),
+        "--parts",
+        "2",
+        "--resolution",
+        "16",
+    ]);
+    assert!(
+        shape_out.contains("mean of 2 encoder calls") && shape_out.contains("codes fitted"),
+        "{shape_out}"
+    );
+    let o = encode_fitted(&["--encoder-views", "0"]);
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        e.contains("encoder_views") && e.contains("between 1 and 64") && e.contains('0'),
+        "{e}"
+    );
+
     // `eval denoiser`: the held-out ε-loss per noise level, with and without the category, on
     // the codes the denoiser trained on; the same seed repeats it exactly.
     let den = |split: &str, out: &Path| {

@@ -442,13 +442,44 @@ impl HostDecoder {
         idx: &[usize],
         upstream: &(dyn Fn(usize, f32) -> f32 + Sync),
     ) -> WeightGrads {
+        self.grads(q, features, idx, upstream, true)
+    }
+
+    /// [`HostDecoder::weight_grads`] without the weights' gradients (`layers` is empty): the
+    /// values and ∂L/∂(code features) alone, what fitting a code with the decoder frozen
+    /// needs, at about two thirds of the cost.
+    ///
+    /// # Panics
+    /// As [`HostDecoder::weight_grads`].
+    pub fn feature_grads(
+        &self,
+        q: &[[f32; 3]],
+        features: &[f32],
+        idx: &[usize],
+        upstream: &(dyn Fn(usize, f32) -> f32 + Sync),
+    ) -> WeightGrads {
+        self.grads(q, features, idx, upstream, false)
+    }
+
+    fn grads(
+        &self,
+        q: &[[f32; 3]],
+        features: &[f32],
+        idx: &[usize],
+        upstream: &(dyn Fn(usize, f32) -> f32 + Sync),
+        with_weights: bool,
+    ) -> WeightGrads {
         self.check_inputs(q, features, idx);
         let fw = self.feature_width();
         let group_rows = GROUP_BLOCKS * BLOCK_ROWS;
         let zeros = || WeightGrads {
             values: Vec::new(),
             d_features: vec![0.0; features.len() / fw * fw],
-            layers: self.layers().into_iter().map(LinearGrad::zeros).collect(),
+            layers: if with_weights {
+                self.layers().into_iter().map(LinearGrad::zeros).collect()
+            } else {
+                Vec::new()
+            },
         };
         let groups: Vec<WeightGrads> = q
             .par_chunks(group_rows)
@@ -470,7 +501,7 @@ impl HostDecoder {
                     for (r, (u, &f)) in up.iter_mut().zip(out.iter()).enumerate() {
                         *u = upstream(first + r, f);
                     }
-                    self.backward_weights(idx, &up[..q.len()], &mut s, &mut acc);
+                    self.backward_weights(idx, &up[..q.len()], &mut s, &mut acc, with_weights);
                 }
                 acc.values = values;
                 acc
@@ -490,55 +521,76 @@ impl HostDecoder {
 
     /// The backward pass of the block just run by [`HostDecoder::forward_block`], seeded with
     /// `up` (∂L/∂f per row): accumulates the weight gradients and ∂L/∂features into `acc`.
-    fn backward_weights(&self, idx: &[usize], up: &[f32], s: &mut Scratch, acc: &mut WeightGrads) {
+    ///
+    /// With `with_weights` false only ∂L/∂features is accumulated (`acc.layers` may be empty).
+    fn backward_weights(
+        &self,
+        idx: &[usize],
+        up: &[f32],
+        s: &mut Scratch,
+        acc: &mut WeightGrads,
+        with_weights: bool,
+    ) {
         let rows = idx.len();
         let n_blocks = self.blocks.len();
         let last = self.blocks.last().map_or(self.hidden(), |b| b.fc_1.d_out);
-        let mut layer = acc.layers.len() - 1;
+        // Layer index into acc.layers (counts down; unused without the weights' gradients).
+        let mut layer = self.layers().len() - 1;
         // f = LeakyReLU(h_L) w_out + b_out: ∂w_out = Σ_r u_r LeakyReLU(h_L,r), ∂b_out = Σ_r u_r,
         // g_L = u_r w_out ⊙ LeakyReLU'(h_L).
         let w = &self.fc_out.w;
-        let out = &mut acc.layers[layer];
-        for ((g, h), &u) in s.g[..rows * last]
+        for (r, ((g, h), &u)) in s.g[..rows * last]
             .chunks_exact_mut(last)
             .zip(s.hs[n_blocks].chunks_exact(last))
             .zip(up)
+            .enumerate()
         {
-            for (((g, &h), &w), dw) in g.iter_mut().zip(h).zip(w).zip(out.w.iter_mut()) {
-                let (act, slope) = if h >= 0.0 { (h, 1.0) } else { (0.2 * h, 0.2) };
-                *dw += u * act;
-                *g = u * slope * w;
+            for ((g, &h), &w) in g.iter_mut().zip(h).zip(w) {
+                *g = u * if h >= 0.0 { 1.0 } else { 0.2 } * w;
             }
-            if let Some(db) = &mut out.b {
-                db[0] += u;
+            if with_weights {
+                let out = &mut acc.layers[layer];
+                let h = &s.hs[n_blocks][r * last..(r + 1) * last];
+                for (dw, &h) in out.w.iter_mut().zip(h) {
+                    *dw += u * if h >= 0.0 { h } else { 0.2 * h };
+                }
+                if let Some(db) = &mut out.b {
+                    db[0] += u;
+                }
             }
         }
         for (l, b) in self.blocks.iter().enumerate().rev() {
             let (w_in, mid, w_out) = (b.fc_0.d_in, b.fc_0.d_out, b.fc_1.d_out);
             if b.shortcut.is_some() {
                 // ∂S = h_lᵀ g.
-                let sc = &mut acc.layers[layer - 1];
-                matmul_at_acc(&mut sc.w, &s.hs[l], &s.g, w_in, rows, w_out);
+                if with_weights {
+                    let sc = &mut acc.layers[layer - 1];
+                    matmul_at_acc(&mut sc.w, &s.hs[l], &s.g, w_in, rows, w_out);
+                }
                 layer -= 1;
             }
             // ∂W₁ = t_lᵀ g, ∂b₁ = Σ_r g.
-            let fc_1 = &mut acc.layers[layer - 1];
-            matmul_at_acc(&mut fc_1.w, &s.ts[l], &s.g, mid, rows, w_out);
-            if let Some(db) = &mut fc_1.b {
-                col_sums_acc(db, &s.g, rows);
+            if with_weights {
+                let fc_1 = &mut acc.layers[layer - 1];
+                matmul_at_acc(&mut fc_1.w, &s.ts[l], &s.g, mid, rows, w_out);
+                if let Some(db) = &mut fc_1.b {
+                    col_sums_acc(db, &s.g, rows);
+                }
             }
             // a = (g W₁ᵀ) ⊙ [t_l > 0]; ∂W₀ = ReLU(h_l)ᵀ a, ∂b₀ = Σ_r a.
             s.a[..rows * mid].fill(0.0);
             matmul_bt_acc(&mut s.a, &s.g, &b.fc_1.w, rows, w_out, mid);
             relu_backward(&mut s.a[..rows * mid], &s.ts[l]);
-            s.g_next[..rows * w_in]
-                .iter_mut()
-                .zip(&s.hs[l][..rows * w_in])
-                .for_each(|(r, &h)| *r = h.max(0.0));
-            let fc_0 = &mut acc.layers[layer - 2];
-            matmul_at_acc(&mut fc_0.w, &s.g_next, &s.a, w_in, rows, mid);
-            if let Some(db) = &mut fc_0.b {
-                col_sums_acc(db, &s.a, rows);
+            if with_weights {
+                s.g_next[..rows * w_in]
+                    .iter_mut()
+                    .zip(&s.hs[l][..rows * w_in])
+                    .for_each(|(r, &h)| *r = h.max(0.0));
+                let fc_0 = &mut acc.layers[layer - 2];
+                matmul_at_acc(&mut fc_0.w, &s.g_next, &s.a, w_in, rows, mid);
+                if let Some(db) = &mut fc_0.b {
+                    col_sums_acc(db, &s.a, rows);
+                }
             }
             layer -= 2;
             // g_next = (a W₀ᵀ) ⊙ [h_l > 0] + (g or g Sᵀ).
@@ -559,10 +611,12 @@ impl HostDecoder {
         // h₀ = features[idx] + γ W_p + b_p: ∂W_p = γᵀ g₀, ∂b_p = Σ_r g₀, ∂features[i] = Σ_{idx=i} g₀.
         let hidden = self.hidden();
         let pe_dim = self.fc_p.d_in;
-        let fc_p = &mut acc.layers[0];
-        matmul_at_acc(&mut fc_p.w, &s.pe, &s.g, pe_dim, rows, hidden);
-        if let Some(db) = &mut fc_p.b {
-            col_sums_acc(db, &s.g, rows);
+        if with_weights {
+            let fc_p = &mut acc.layers[0];
+            matmul_at_acc(&mut fc_p.w, &s.pe, &s.g, pe_dim, rows, hidden);
+            if let Some(db) = &mut fc_p.b {
+                col_sums_acc(db, &s.g, rows);
+            }
         }
         self.add_feature_grads(idx, 0, &s.g, &mut acc.d_features);
     }
@@ -842,6 +896,40 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// The fitting pass computes exactly the training pass's values and code-feature
+    /// gradients, without the weights' gradients.
+    #[test]
+    fn feature_grads_are_the_training_pass_without_the_weights() {
+        let cfg = ShapePriorConfig {
+            latent: 16,
+            decoder_hidden: 24,
+            decoder_blocks: 3,
+            encoder_hidden: 8,
+            encoder_blocks: 1,
+            pe_freqs: 4,
+            code_every_block: true,
+        };
+        let mut rng = Rng::new(11);
+        let dec = randomised(ShapeDecoder::new(&cfg, &mut rng, &cpu()), 5);
+        let host = HostDecoder::new(&dec);
+        let (p, n) = (3, 700); // several groups of blocks and a partial one
+        let pts: Vec<[f32; 3]> = (0..p * n)
+            .map(|_| std::array::from_fn(|_| rng.range(-0.6, 0.6) as f32))
+            .collect();
+        let codes: Vec<f32> = (0..p * cfg.latent)
+            .map(|_| rng.range(-1.0, 1.0) as f32)
+            .collect();
+        let features = host.code_features(&codes);
+        let idx: Vec<usize> = (0..p * n).map(|r| r / n).collect();
+        let up = |r: usize, f: f32| (f - 0.01 * (r % 7) as f32).signum() / n as f32;
+        let full = host.weight_grads(&pts, &features, &idx, &up);
+        let lean = host.feature_grads(&pts, &features, &idx, &up);
+        assert_eq!(full.values, lean.values);
+        assert_eq!(full.d_features, lean.d_features);
+        assert!(lean.layers.is_empty());
+        assert!(full.d_features.iter().any(|g| *g != 0.0));
     }
 
     #[test]

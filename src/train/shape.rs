@@ -564,12 +564,43 @@ struct PartSamples {
     surface: Vec<f32>,
 }
 
-/// A val part: encoder input, query samples and ground-truth occupancy.
+/// A val part: encoder input (every view), query samples, the samples a code fit uses, and
+/// the ground-truth occupancy.
 struct ValPart {
     surface: Vec<f32>,
     queries: Vec<f32>,
     targets: Vec<f32>,
+    fit: FitSamples,
     occupancy: Vec<bool>,
+}
+
+/// The SDF samples a part's code is fitted to ([`Encoding::fit_queries`] rows; empty when
+/// the encoding fits nothing).
+#[derive(Default)]
+struct FitSamples {
+    /// [n × 3].
+    queries: Vec<f32>,
+    /// [n].
+    targets: Vec<f32>,
+}
+
+/// The first `n / 2` uniform and the first `n / 2` near-surface samples of `s` (cycled when a
+/// file has fewer): the deterministic evaluation rows, as NAP's evaluation takes chunk 0.
+fn first_samples(s: &PartSamples, n: usize) -> FitSamples {
+    let half = n / 2;
+    let mut out = FitSamples {
+        queries: Vec::with_capacity(2 * half * 3),
+        targets: Vec::with_capacity(2 * half),
+    };
+    for rows in [&s.uniform, &s.near] {
+        let m = rows.len() / 4;
+        for i in 0..half {
+            let r = &rows[4 * (i % m)..4 * (i % m) + 4];
+            out.queries.extend_from_slice(&r[..3]);
+            out.targets.push(r[3]);
+        }
+    }
+    out
 }
 
 /// All parts of `data/dataset.json` in dataset order (objects, then part index).
@@ -704,24 +735,20 @@ fn load_val_part(
     data: &Path,
     p: &PartRef,
     cfg: &ShapeTrainConfig,
+    enc: &Encoding,
     grid: &[[f32; 3]],
 ) -> Result<ValPart, TrainError> {
     let s = load_part(data, p)?;
-    let half = cfg.queries_per_part / 2;
-    let mut queries = Vec::with_capacity(cfg.queries_per_part * 3);
-    let mut targets = Vec::with_capacity(cfg.queries_per_part);
-    for rows in [&s.uniform, &s.near] {
-        let n = rows.len() / 4;
-        for i in 0..half {
-            let r = &rows[4 * (i % n)..4 * (i % n) + 4];
-            queries.extend_from_slice(&r[..3]);
-            targets.push(r[3]);
-        }
-    }
+    let FitSamples { queries, targets } = first_samples(&s, cfg.queries_per_part);
     Ok(ValPart {
-        surface: first_points(&s.surface, cfg.surface_points),
+        surface: first_points(&s.surface, cfg.surface_points * enc.views),
         queries,
         targets,
+        fit: if enc.fit_steps > 0 {
+            first_samples(&s, enc.fit_queries)
+        } else {
+            FitSamples::default()
+        },
         occupancy: gt_occupancy(data, p, grid)?,
     })
 }
@@ -806,27 +833,20 @@ fn evaluate(
     val: &[ValPart],
     cfg: &ShapeTrainConfig,
     grid: &[f32],
-    fit_steps: usize,
+    enc: &Encoding,
 ) -> (Vec<f64>, f64) {
     if val.is_empty() {
         return (Vec::new(), f64::NAN);
     }
     let device = cpu();
-    let (v, s, q) = (val.len(), cfg.surface_points, cfg.queries_per_part);
-    let surf: Vec<f32> = val.iter().flat_map(|p| p.surface.iter().copied()).collect();
-    let mut codes = model
-        .encoder
-        .encode(Tensor::from_data(TensorData::new(surf, [v, s, 3]), &device));
+    let (v, q) = (val.len(), cfg.queries_per_part);
     // The grid decodes (and the code fitting) run on the value-only host decoder (same
     // function, 3-4× faster).
     let host = HostDecoder::new(&model.decoder);
-    if fit_steps > 0 {
-        let fitted = fit_codes(&model.decoder, &host, to_vec(codes), val, q, fit_steps);
-        codes = Tensor::from_data(
-            TensorData::new(fitted, [v, model.decoder.latent()]),
-            &device,
-        );
-    }
+    let surf: Vec<f32> = val.iter().flat_map(|p| p.surface.iter().copied()).collect();
+    let fit: Vec<&FitSamples> = val.iter().map(|p| &p.fit).collect();
+    let codes = encode_codes(model, &host, surf, cfg.surface_points, &fit, enc);
+    let codes = Tensor::from_data(TensorData::new(codes, [v, model.decoder.latent()]), &device);
     let features = model.decoder.code_features(codes);
     let queries: Vec<f32> = val.iter().flat_map(|p| p.queries.iter().copied()).collect();
     let pred = to_vec(model.decoder.sdf_with_features(
@@ -922,20 +942,21 @@ pub fn thinnest_primitive(part: &crate::object::Part) -> Option<f64> {
 const EVAL_CHUNK: usize = 32;
 
 /// Evaluate `model` on `n` parts of `split` (spread evenly over it) exactly as training
-/// evaluates its val parts (`cfg.iou_resolution`³ grid, codes from the first
-/// `cfg.surface_points` surface points). With `fit_steps > 0` each code is then fitted to the
-/// part's samples with the decoder frozen ([`fit_codes`]), which measures the decoder alone.
-/// `progress(done, total)` after every batch of parts. Returns per-part IoUs and the mean L1 on the parts' first `cfg.queries_per_part` samples.
+/// evaluates its val parts (`cfg.iou_resolution`³ grid), with codes made by `enc`
+/// ([`Encoding`]; training's evaluations use NAP's: the first `cfg.surface_points` surface
+/// points). `progress(done, total)` after every batch of parts. Returns per-part IoUs and the
+/// mean L1 on the parts' first `cfg.queries_per_part` samples.
 pub fn evaluate_shape_prior(
     model: &ShapePrior,
     data: &Path,
     cfg: &ShapeTrainConfig,
     split: &str,
     n: usize,
-    fit_steps: usize,
+    enc: &Encoding,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<(Vec<PartIou>, f64), TrainError> {
     cfg.validate()?;
+    enc.validate()?;
     let all = read_index(data)?;
     let refs = split_selection(&all, split, n);
     if refs.is_empty() {
@@ -951,9 +972,9 @@ pub fn evaluate_shape_prior(
     for chunk in refs.chunks(EVAL_CHUNK) {
         let parts: Vec<ValPart> = chunk
             .par_iter()
-            .map(|p| load_val_part(data, p, cfg, &grid_pts))
+            .map(|p| load_val_part(data, p, cfg, enc, &grid_pts))
             .collect::<Result<_, _>>()?;
-        let (ious, l1) = evaluate(&model, &parts, cfg, &grid, fit_steps);
+        let (ious, l1) = evaluate(&model, &parts, cfg, &grid, enc);
         l1_sum += l1 * chunk.len() as f64;
         for (p, iou) in chunk.iter().zip(ious) {
             let file = data.join("objects").join(&p.id).join("object.json");
@@ -978,36 +999,171 @@ pub fn evaluate_shape_prior(
     Ok((per_part, l1_sum / refs.len() as f64))
 }
 
+/// How a part's code is made from its data: what the codebook (and so the denoiser's training
+/// codes), `eval shape` and `eval reconstruction` use.
+///
+/// ```text
+/// z₀ = (1/V) Σ_v E(P_v)        P_v: surface points v·S … (v+1)·S − 1 of the part (cycled)
+/// z  = argmin_z mean_r |f(q_r; z) − s_r|   by `fit_steps` Adam steps from z₀ (lr FIT_LR),
+///      over the part's first fit_queries/2 uniform and near-surface samples, decoder frozen
+/// ```
+///
+/// V = 1 and no fit is NAP's encoding (one encoder call on the first S points). Averaging the
+/// views evens out which S points the encoder happens to see; the fit is DeepSDF's
+/// auto-decoder inference started from the encoder's code. Both use only what the data set
+/// holds for every part, so the codebook's codes and the evaluated val codes come from the
+/// same protocol. A report without an `"encoding"` entry was made by NAP's encoding.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Encoding {
+    /// Encoder calls per part, each on the next `surface_points` surface points; the code is
+    /// their mean.
+    pub views: usize,
+    /// Adam steps fitting each code to its part's SDF samples (0: the encoder's code).
+    pub fit_steps: usize,
+    /// SDF samples a part's fit uses (half uniform, half near-surface; even).
+    pub fit_queries: usize,
+}
+
+impl Default for Encoding {
+    fn default() -> Self {
+        Encoding {
+            views: 1,
+            fit_steps: 0,
+            fit_queries: 2048,
+        }
+    }
+}
+
+/// Most encoder views per part.
+pub const MAX_ENCODER_VIEWS: usize = 64;
+/// Most fitting steps per code.
+pub const MAX_FIT_STEPS: usize = 1000;
+/// Most SDF samples per part a fit uses.
+pub const MAX_FIT_QUERIES: usize = 8192;
+
+impl Encoding {
+    /// Check every field against its range; the error names the field, the limit and the
+    /// value.
+    pub fn validate(&self) -> Result<(), TrainError> {
+        if !(1..=MAX_ENCODER_VIEWS).contains(&self.views) {
+            return Err(TrainError::config(
+                "encoder_views",
+                format!("between 1 and {MAX_ENCODER_VIEWS}"),
+                self.views,
+            ));
+        }
+        if self.fit_steps > MAX_FIT_STEPS {
+            return Err(TrainError::config(
+                "fit_steps",
+                format!("at most {MAX_FIT_STEPS}"),
+                self.fit_steps,
+            ));
+        }
+        if !(2..=MAX_FIT_QUERIES).contains(&self.fit_queries) || !self.fit_queries.is_multiple_of(2)
+        {
+            return Err(TrainError::config(
+                "fit_queries",
+                format!("an even number between 2 and {MAX_FIT_QUERIES}"),
+                self.fit_queries,
+            ));
+        }
+        Ok(())
+    }
+
+    /// The `"encoding"` entry of a shape report.
+    pub fn to_json(&self) -> Value {
+        json!({
+            "views": self.views,
+            "fit_steps": self.fit_steps,
+            "fit_queries": self.fit_queries,
+            "fit_lr": FIT_LR,
+        })
+    }
+
+    /// The encoding a shape report (`shape_train.json`, or a manifest's `training.shape`)
+    /// records; NAP's single encoder call when it records none. `file` names the report in
+    /// errors.
+    pub fn of_report(report: &Value, file: &Path) -> Result<Encoding, TrainError> {
+        let e = &report["encoding"];
+        if e.is_null() {
+            return Ok(Encoding::default());
+        }
+        let field = |k: &str| {
+            e[k].as_u64().map(|v| v as usize).ok_or_else(|| {
+                TrainError::data(file, format!("encoding.{k} is missing or not a count"))
+            })
+        };
+        let enc = Encoding {
+            views: field("views")?,
+            fit_steps: field("fit_steps")?,
+            fit_queries: field("fit_queries")?,
+        };
+        enc.validate()?;
+        Ok(enc)
+    }
+}
+
 /// Adam learning rate of [`fit_codes`].
 pub const FIT_LR: f32 = 1e-2;
 
-/// The decoder's best codes for `val`'s parts: `steps` Adam steps (lr [`FIT_LR`]) on each
-/// part's code, from the encoder's `codes` [P × F], minimising the mean |f(q; z) − f_gt| over
-/// the part's evaluation queries, with the decoder frozen (DeepSDF's auto-decoder inference).
-/// An evaluation with fitted codes measures what the decoder can represent, apart from what
-/// the encoder finds.
+/// Codes [P × F] of P parts by `enc` ([`Encoding`]): `surface` holds each part's `enc.views`
+/// × `s` encoder points in a row, `fit` each part's fit samples (unused without fitting).
+fn encode_codes(
+    model: &ShapePrior,
+    host: &HostDecoder,
+    surface: Vec<f32>,
+    s: usize,
+    fit: &[&FitSamples],
+    enc: &Encoding,
+) -> Vec<f32> {
+    let (p, f, k) = (fit.len(), model.decoder.latent(), enc.views);
+    let z = model.encoder.encode(Tensor::from_data(
+        TensorData::new(surface, [p * k, s, 3]),
+        &cpu(),
+    ));
+    let z = if k > 1 {
+        z.reshape([p, k, f]).mean_dim(1).reshape([p, f])
+    } else {
+        z
+    };
+    let codes = to_vec(z);
+    if enc.fit_steps == 0 {
+        return codes;
+    }
+    fit_codes(&model.decoder, host, codes, fit, enc.fit_steps)
+}
+
+/// The decoder's best codes for parts with samples `fit`: `steps` Adam steps (lr [`FIT_LR`])
+/// on each part's code, from `codes` [P × F], minimising the mean |f(q; z) − f_gt| over the
+/// part's samples, with the decoder frozen (DeepSDF's auto-decoder inference). Each part's
+/// code moves by its own samples only, so the result does not depend on how parts are
+/// batched.
 fn fit_codes(
     decoder: &ShapeDecoder,
     host: &HostDecoder,
     mut codes: Vec<f32>,
-    val: &[ValPart],
-    q: usize,
+    fit: &[&FitSamples],
     steps: usize,
 ) -> Vec<f32> {
     let (f, fw) = (host.latent(), host.feature_width());
     let w_c = to_vec(decoder.fc_c.weight.val()); // [F, fw], row-major
-    let pts: Vec<[f32; 3]> = val
+    let pts: Vec<[f32; 3]> = fit
         .iter()
         .flat_map(|p| p.queries.chunks_exact(3).map(|c| [c[0], c[1], c[2]]))
         .collect();
-    let tgt: Vec<f32> = val.iter().flat_map(|p| p.targets.iter().copied()).collect();
-    let idx: Vec<usize> = (0..pts.len()).map(|r| r / q).collect();
+    let tgt: Vec<f32> = fit.iter().flat_map(|p| p.targets.iter().copied()).collect();
+    // Row r's part and the 1 / n of its mean.
+    let (idx, inv_n): (Vec<usize>, Vec<f32>) = fit
+        .iter()
+        .enumerate()
+        .flat_map(|(i, p)| std::iter::repeat_n((i, 1.0 / p.targets.len() as f32), p.targets.len()))
+        .unzip();
     let (mut m, mut v) = (vec![0.0f32; codes.len()], vec![0.0f32; codes.len()]);
     let (b1, b2, eps) = (0.9f32, 0.999f32, 1e-8f32);
     for t in 1..=steps {
         let features = host.code_features(&codes);
-        let g = host.weight_grads(&pts, &features, &idx, &|r, y| {
-            (y - tgt[r]).signum() / q as f32
+        let g = host.feature_grads(&pts, &features, &idx, &|r, y| {
+            (y - tgt[r]).signum() * inv_n[r]
         });
         let (c1, c2) = (1.0 - b1.powi(t as i32), 1.0 - b2.powi(t as i32));
         for (p, dh) in g.d_features.chunks_exact(fw).enumerate() {
@@ -1182,39 +1338,76 @@ pub fn load_shape_dir(
     Ok((model, cfg, doc))
 }
 
-/// Codes of parts `0..parts` of object `id` in `data`, encoded as the codebook encodes them
-/// (the first `surface_points` points of each `part<k>_surface.npy`, cycled if fewer), one
-/// encoder call for the object.
+/// Codes of parts `0..parts` of object `id` in `data`, made as the codebook makes them: by
+/// `enc` from the first `surface_points` × `enc.views` points of each `part<k>_surface.npy`
+/// (cycled if fewer) and, when it fits, the part's SDF samples; one encoder call for the
+/// object.
 pub fn encode_object_parts(
     model: &ShapePrior,
     data: &Path,
     id: &str,
     parts: usize,
     surface_points: usize,
+    enc: &Encoding,
 ) -> Result<Vec<Vec<f32>>, TrainError> {
     if parts == 0 || surface_points == 0 {
         return Ok(Vec::new());
     }
-    let mut flat = Vec::with_capacity(parts * surface_points * 3);
-    for k in 0..parts {
-        let p = PartRef {
+    enc.validate()?;
+    let refs: Vec<PartRef> = (0..parts)
+        .map(|k| PartRef {
             id: id.to_string(),
             k,
             split: String::new(),
             category: None,
-        };
-        let (_, pts) = read_rows(&p.file(data, "surface"), 3)?;
-        flat.extend(first_points(&pts, surface_points));
-    }
-    let z = model.encoder.encode(Tensor::from_data(
-        TensorData::new(flat, [parts, surface_points, 3]),
-        &cpu(),
-    ));
-    let latent = z.dims()[1];
-    Ok(to_vec(z)
-        .chunks_exact(latent)
+        })
+        .collect();
+    let host = HostDecoder::new(&model.decoder);
+    let codes = encode_refs(model, &host, data, &refs, surface_points, enc)?;
+    Ok(codes
+        .chunks_exact(model.decoder.latent())
         .map(<[f32]>::to_vec)
         .collect())
+}
+
+/// Codes [P × F] of the parts `refs` by `enc`, read from `data` (surface points, and the SDF
+/// samples when the encoding fits).
+fn encode_refs(
+    model: &ShapePrior,
+    host: &HostDecoder,
+    data: &Path,
+    refs: &[PartRef],
+    surface_points: usize,
+    enc: &Encoding,
+) -> Result<Vec<f32>, TrainError> {
+    let loaded: Vec<(Vec<f32>, FitSamples)> = refs
+        .par_iter()
+        .map(|p| {
+            let (_, pts) = read_rows(&p.file(data, "surface"), 3)?;
+            let surf = first_points(&pts, surface_points * enc.views);
+            let fit = if enc.fit_steps > 0 {
+                let samples = PartSamples {
+                    uniform: read_rows(&p.file(data, "uniform"), 4)?.1,
+                    near: read_rows(&p.file(data, "near"), 4)?.1,
+                    surface: Vec::new(),
+                };
+                first_samples(&samples, enc.fit_queries)
+            } else {
+                FitSamples::default()
+            };
+            Ok((surf, fit))
+        })
+        .collect::<Result<_, TrainError>>()?;
+    let surface: Vec<f32> = loaded.iter().flat_map(|(s, _)| s.iter().copied()).collect();
+    let fit: Vec<&FitSamples> = loaded.iter().map(|(_, f)| f).collect();
+    Ok(encode_codes(
+        model,
+        host,
+        surface,
+        surface_points,
+        &fit,
+        enc,
+    ))
 }
 
 /// What [`encode_shape_dir`] wrote.
@@ -1244,7 +1437,10 @@ pub fn encode_shape_dir(
     report: &Value,
     data: &Path,
     out: &Path,
+    enc: &Encoding,
+    progress: &mut dyn FnMut(usize, usize),
 ) -> Result<EncodeReport, TrainError> {
+    enc.validate()?;
     let model_cfg = model_config_of(report, weights_file)?;
     let surface_points = report["config"]["surface_points"]
         .as_u64()
@@ -1263,7 +1459,7 @@ pub fn encode_shape_dir(
         surface_points,
         ..ShapeTrainConfig::default()
     };
-    let rows = write_codebook(&model, data, &all, &cfg, out)?;
+    let rows = write_codebook(&model, data, &all, &cfg, enc, out, progress)?;
     let dst = out.join(WEIGHTS_FILE);
     if dst != weights_file {
         std::fs::copy(weights_file, &dst).map_err(TrainError::io(&dst))?;
@@ -1272,6 +1468,15 @@ pub fn encode_shape_dir(
     doc["data"] = json!(data.display().to_string());
     doc["codebook_rows"] = json!(rows);
     doc["encoded_from"] = json!(weights_file.display().to_string());
+    if *enc == Encoding::default() {
+        // NAP's encoding is what a report without the entry means; an older report's own
+        // entry (it was encoded otherwise before) would now be wrong.
+        if let Some(o) = doc.as_object_mut() {
+            o.remove("encoding");
+        }
+    } else {
+        doc["encoding"] = enc.to_json();
+    }
     write_atomic(
         &out.join(REPORT_FILE),
         serde_json::to_string_pretty(&doc)
@@ -1323,34 +1528,28 @@ pub fn read_codebook(shape: &Path, latent: usize) -> Result<CodebookFile, TrainE
     Ok(CodebookFile { cols, codes, keys })
 }
 
-/// Encode every part of the data set (dataset order) from its first `surface_points` surface
-/// points; writes `codebook.npy` and `codebook.json`. Returns the number of rows.
+/// Encode every part of the data set (dataset order) by `enc` ([`Encoding`]); writes
+/// `codebook.npy` and `codebook.json`. `progress(done, total)` after every batch of parts.
+/// Returns the number of rows.
 fn write_codebook(
     model: &ShapePrior,
     data: &Path,
     parts: &[PartRef],
     cfg: &ShapeTrainConfig,
+    enc: &Encoding,
     out: &Path,
+    progress: &mut dyn FnMut(usize, usize),
 ) -> Result<usize, TrainError> {
+    // Parts per encoder call (and per fitting batch: each code's fit is its own, so the batch
+    // size changes nothing but the speed).
     const BATCH: usize = 32;
-    let device = cpu();
     let s = cfg.surface_points;
     let f = cfg.model.latent;
+    let host = HostDecoder::new(&model.decoder);
     let mut codes = Vec::with_capacity(parts.len() * f);
     for chunk in parts.chunks(BATCH) {
-        let surf: Vec<Vec<f32>> = chunk
-            .par_iter()
-            .map(|p| {
-                let (_, pts) = read_rows(&p.file(data, "surface"), 3)?;
-                Ok(first_points(&pts, s))
-            })
-            .collect::<Result<_, TrainError>>()?;
-        let flat: Vec<f32> = surf.into_iter().flatten().collect();
-        let z = model.encoder.encode(Tensor::from_data(
-            TensorData::new(flat, [chunk.len(), s, 3]),
-            &device,
-        ));
-        codes.extend(to_vec(z));
+        codes.extend(encode_refs(model, &host, data, chunk, s, enc)?);
+        progress(codes.len() / f, parts.len());
     }
     let mut max_abs = vec![0.0f32; f];
     for row in codes.chunks(f) {
@@ -1367,6 +1566,7 @@ fn write_codebook(
         "latent": f,
         "rows": parts.len(),
         "encoder_input": format!("first {s} points of part<k>_surface.npy (cycled if fewer)"),
+        "encoding": enc.to_json(),
         "max_abs": max_abs,
         "keys": parts.iter().map(|p| {
             let mut key = json!({
@@ -2028,7 +2228,7 @@ fn run(
     let grid_pts = iou_grid(cfg.iou_resolution);
     let val: Vec<ValPart> = val_refs
         .iter()
-        .map(|p| load_val_part(data, p, cfg, &grid_pts))
+        .map(|p| load_val_part(data, p, cfg, &Encoding::default(), &grid_pts))
         .collect::<Result<_, _>>()?;
     let grid: Vec<f32> = grid_pts.into_iter().flatten().collect();
     std::fs::create_dir_all(out).map_err(TrainError::io(out))?;
@@ -2082,7 +2282,13 @@ fn run(
         let eval_now = done == cfg.steps || (cfg.eval_every > 0 && done % cfg.eval_every == 0);
         let (mut val_iou, mut val_l1) = (None, None);
         if eval_now && !val.is_empty() {
-            let (ious, l1) = evaluate(&trainer.inference_model(), &val, cfg, &grid, 0);
+            let (ious, l1) = evaluate(
+                &trainer.inference_model(),
+                &val,
+                cfg,
+                &grid,
+                &Encoding::default(),
+            );
             let iou = ious.iter().sum::<f64>() / ious.len() as f64;
             let elapsed_s = elapsed_before + t_train.elapsed().as_secs_f64();
             curve.push(EvalPoint {
@@ -2143,7 +2349,15 @@ fn run(
 
     let model = trainer.inference_model();
     save_shape_prior(&model, &out.join(WEIGHTS_FILE))?;
-    let codebook_rows = write_codebook(&model, data, &all, cfg, out)?;
+    let codebook_rows = write_codebook(
+        &model,
+        data,
+        &all,
+        cfg,
+        &Encoding::default(),
+        out,
+        &mut |_, _| {},
+    )?;
     let report = report(codebook_rows, curve);
     let doc = json!({
         "format": REPORT_FORMAT,
@@ -2316,6 +2530,8 @@ mod tests {
             &report_doc,
             &data.path().join("train"),
             &again,
+            &Encoding::default(),
+            &mut |_, _| {},
         )
         .unwrap();
         assert_eq!(
@@ -2340,6 +2556,8 @@ mod tests {
                 report,
                 &data.path().join("train"),
                 &again,
+                &Encoding::default(),
+                &mut |_, _| {},
             )
             .unwrap_err()
             .to_string()
@@ -2699,7 +2917,13 @@ mod tests {
         };
         train_shape(&train, &cfg, &out, &mut |_| {}).unwrap();
         let (model, _, _) = load_shape_dir(&out, &cpu()).unwrap();
-        let run = |fit| evaluate_shape_prior(&model, &train, &cfg, "val", 4, fit, &mut |_, _| {});
+        let run = |fit_steps| {
+            let enc = Encoding {
+                fit_steps,
+                ..Encoding::default()
+            };
+            evaluate_shape_prior(&model, &train, &cfg, "val", 4, &enc, &mut |_, _| {})
+        };
         let (_, encoded) = run(0).unwrap();
         let (_, again) = run(0).unwrap();
         let (_, fitted) = run(30).unwrap();
@@ -2708,6 +2932,135 @@ mod tests {
             fitted < 0.9 * encoded,
             "fitted {fitted} vs encoded {encoded}"
         );
+    }
+
+    /// The encoding protocol ([`Encoding`]): V views average V encoder calls on consecutive
+    /// blocks of surface points; a fit moves each code by its own part's samples only, so an
+    /// object's parts (`encode_object_parts`, `eval reconstruction`) get the codes the
+    /// codebook (`train encode`, batches of 32 parts) gives them; the report records the
+    /// encoding and reads it back, and a bad field is refused by name, limit and value.
+    #[test]
+    fn encodings_average_views_fit_per_part_and_are_recorded() {
+        let data = tiny_dataset(13);
+        let train = data.path().join("train");
+        let out = data.path().join("run");
+        let cfg = ShapeTrainConfig {
+            steps: 20,
+            eval_every: 0,
+            checkpoint_every: 0,
+            ..tiny_config()
+        };
+        train_shape(&train, &cfg, &out, &mut |_| {}).unwrap();
+        let (model, _, report) = load_shape_dir(&out, &cpu()).unwrap();
+        let all = read_index(&train).unwrap();
+        let id = all[0].id.clone();
+        let n = all.iter().filter(|p| p.id == id).count();
+        let s = cfg.surface_points;
+        let nap = Encoding::default();
+        let two = Encoding { views: 2, ..nap };
+        // Two views = the mean of the encoder on points 0..S and S..2S.
+        let one = encode_object_parts(&model, &train, &id, n, s, &nap).unwrap();
+        let avg = encode_object_parts(&model, &train, &id, n, s, &two).unwrap();
+        let (_, pts) = read_rows(&all[0].file(&train, "surface"), 3).unwrap();
+        let second = first_points(&pts, 2 * s)[3 * s..].to_vec();
+        let z2 = to_vec(model.encoder.encode(Tensor::from_data(
+            TensorData::new(second, [1, s, 3]),
+            &cpu(),
+        )));
+        for (i, (a, b)) in one[0].iter().zip(&z2).enumerate() {
+            let want = (a + b) / 2.0;
+            assert!(
+                (avg[0][i] - want).abs() < 1e-5,
+                "dim {i}: {} vs {want}",
+                avg[0][i]
+            );
+        }
+        assert_ne!(one[0], avg[0]);
+        // Fitted codes: the codebook's rows of this object are its own encoding's.
+        let fit = Encoding {
+            views: 2,
+            fit_steps: 5,
+            fit_queries: 64,
+        };
+        let fitted = encode_object_parts(&model, &train, &id, n, s, &fit).unwrap();
+        let report_doc: Value = report.clone();
+        let dir = data.path().join("fitted");
+        let rep = encode_shape_dir(
+            &out.join(WEIGHTS_FILE),
+            &report_doc,
+            &train,
+            &dir,
+            &fit,
+            &mut |_, _| {},
+        )
+        .unwrap();
+        assert_eq!(rep.rows, all.len());
+        let book = read_codebook(&dir, cfg.model.latent).unwrap();
+        let f = cfg.model.latent;
+        for (k, code) in fitted.iter().enumerate() {
+            let row = all.iter().position(|p| p.id == id && p.k == k).unwrap();
+            let stored = &book.codes[row * f..(row + 1) * f];
+            let moved: f32 = code.iter().zip(&avg[k]).map(|(a, b)| (a - b).abs()).sum();
+            assert!(moved > 1e-4, "part {k}: the fit did not move the code");
+            for (a, b) in stored.iter().zip(code) {
+                assert!((a - b).abs() < 1e-4, "part {k}: codebook {a} vs object {b}");
+            }
+        }
+        let doc: Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join(REPORT_FILE)).unwrap()).unwrap();
+        assert_eq!(Encoding::of_report(&doc, &dir).unwrap(), fit);
+        assert_eq!(Encoding::of_report(&report, &out).unwrap(), nap);
+        // NAP's encoding again drops the entry.
+        let again = data.path().join("again");
+        encode_shape_dir(
+            &dir.join(WEIGHTS_FILE),
+            &doc,
+            &train,
+            &again,
+            &nap,
+            &mut |_, _| {},
+        )
+        .unwrap();
+        let doc: Value =
+            serde_json::from_str(&std::fs::read_to_string(again.join(REPORT_FILE)).unwrap())
+                .unwrap();
+        assert!(doc["encoding"].is_null(), "{doc}");
+        for (bad, field, limit, value) in [
+            (
+                Encoding { views: 0, ..nap },
+                "encoder_views",
+                "between 1 and 64",
+                "0",
+            ),
+            (
+                Encoding {
+                    fit_steps: 1001,
+                    ..nap
+                },
+                "fit_steps",
+                "at most 1000",
+                "1001",
+            ),
+            (
+                Encoding {
+                    fit_queries: 7,
+                    ..nap
+                },
+                "fit_queries",
+                "an even number",
+                "7",
+            ),
+        ] {
+            let e = bad.validate().unwrap_err().to_string();
+            assert!(
+                e.contains(field) && e.contains(limit) && e.contains(value),
+                "{e}"
+            );
+            let e = encode_object_parts(&model, &train, &id, n, s, &bad)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(field), "{e}");
+        }
     }
 
     /// With `ema_decay` the training losses are the raw run's (the EMA only reads the
@@ -3328,9 +3681,16 @@ mod tests {
             val_parts: var("VAL_PARTS").map_or(MAX_VAL_PARTS, |v| v.parse().unwrap()),
             ..ShapeTrainConfig::default()
         };
-        let (ious, l1) =
-            evaluate_shape_prior(&model, data, &cfg, "val", cfg.val_parts, 0, &mut |_, _| {})
-                .unwrap();
+        let (ious, l1) = evaluate_shape_prior(
+            &model,
+            data,
+            &cfg,
+            "val",
+            cfg.val_parts,
+            &Encoding::default(),
+            &mut |_, _| {},
+        )
+        .unwrap();
         for p in &ious {
             let kind = match p.primitives {
                 Some(n) => format!("{n} primitives"),

@@ -4,20 +4,24 @@
 #   bash scripts/reproduce-weights.sh [OUT]        # default OUT: repro
 #
 # data synth -> data import -> train shape (12,000 steps, 128 parts x 128 queries x 64 surface
-# points a batch, host backward pass, the parts of each step in two slices) -> train diffusion
-# (four runs: 2,000 steps at a constant learning rate, then --resume with one cosine decay and a
-# weight EMA to 14,000 steps in two runs, the second (7,000 -> 14,000) with the box-overlap
-# penalty --overlap-weight 3, then one more cosine cycle (warm restart) to 18,000 steps with the
-# penalty; the denoiser adds its category to every graph layer, --category-layers; each step's
-# batch in two slices) -> two more cosine cycles of the shape prior's decoder with its encoder
-# frozen and an eikonal term (train shape --init-from OUT/weights --freeze-encoder at lr 5e-4:
-# cycle 1 seed 0 eikonal 0.01, cycle 2 seed 1 eikonal 0.03), each installed with train
-# install-shape (the codes, and so the denoiser, stay valid) -> the retrieval codebook (built
-# once, by the last install) -> eval shape and eval generative --write-manifest.
+# points a batch, host backward pass, the parts of each step in two slices) -> two more cosine
+# cycles of the shape prior's decoder with its encoder frozen and an eikonal term (train shape
+# --init-from the previous run --freeze-encoder at lr 5e-4: cycle 1 seed 0 eikonal 0.01, cycle 2
+# seed 1 eikonal 0.03) -> train encode: every part's code from the last cycle (ENCODER_VIEWS,
+# FIT_STEPS, FIT_QUERIES; with NAP's encoding, as shipped, these are the first prior's codes,
+# since the cycles freeze the encoder) -> train diffusion on those codes (four runs: 2,000 steps
+# at a constant learning rate, then --resume with one cosine decay and a weight EMA to 14,000
+# steps in two runs, the second (7,000 -> 14,000) with the box-overlap penalty --overlap-weight
+# 3, then one more cosine cycle (warm restart) to 18,000 steps with the penalty; the denoiser
+# adds its category to every graph layer, --category-layers; each step's batch in two slices;
+# the last run builds the retrieval codebook) -> eval shape and eval generative
+# --write-manifest.
 # OUT/weights is then a drop-in replacement for weights/ (the weights shipped since 2026-11-29,
 # fortieth session, "s14r"; weights/README.md "How they were made"; the shipped shape prior and
 # its cycles were trained before --batch-shards existed, with the single pass, SHAPE_SHARDS=1:
-# the same loss up to float rounding, 1.33x / 1.18x slower per step).
+# the same loss up to float rounding, 1.33x / 1.18x slower per step). Until 2026-11-29 (forty-
+# sixth session) the recipe trained the denoiser before the decoder cycles and installed them
+# with train install-shape; with NAP's encoding both orders give the same codes and weights.
 # About 2 h 15 min on 2 idle cores without the evaluations (BENCHMARKS.md "The recipe timed"):
 # the first prior 47 min, the denoiser 66 min, each decoder cycle 10 min, the codebook 1 min.
 # Inside the issue's 3-hour budget.
@@ -50,6 +54,9 @@
 #   EVALUATION.md "ws10c": DECODER_CYCLES=3 DECODER_EIKONAL="0.01 0.03 0.03"
 #   DECODER_WRONG_SIDE="0 0 10")
 #   DECODER_FLAGS ("": more flags for every decoder cycle)
+#   ENCODER_VIEWS (1)  FIT_STEPS (0)  FIT_QUERIES (2048): train encode's --encoder-views,
+#   --fit-steps and --fit-queries, how the codes the denoiser learns are made (1, 0: NAP's
+#   encoding, as shipped; EVALUATION.md "fc": 16, 50, 512 with the ws10 cycle above)
 #   EVAL (1: run eval shape and eval generative; 0: skip)
 # Earlier shipped weights (their manifests under docs/eval/):
 #   ov3 (2026-11-28, the weights before s14r; docs/eval/single_schedule/previous_manifest.json):
@@ -85,6 +92,9 @@ RESTART_SHARDS=${RESTART_SHARDS:-2}
 DECAY_OVERLAP=${DECAY_OVERLAP:-3}
 SHAPE_SHARDS=${SHAPE_SHARDS:-2}
 EVAL=${EVAL:-1}
+ENCODER_VIEWS=${ENCODER_VIEWS:-1}
+FIT_STEPS=${FIT_STEPS:-0}
+FIT_QUERIES=${FIT_QUERIES:-2048}
 
 if ! [[ "$DECODER_CYCLES" =~ ^[0-9]+$ ]]; then
   echo "invalid DECODER_CYCLES: need a whole number of decoder cycles (0 for none), got '$DECODER_CYCLES'" >&2
@@ -111,6 +121,12 @@ eikonal=()
 wrong_side=()
 per_cycle DECODER_EIKONAL "eikonal weight" eikonal
 per_cycle DECODER_WRONG_SIDE "wrong-side weight" wrong_side
+for knob in ENCODER_VIEWS FIT_STEPS FIT_QUERIES; do
+  if ! [[ "${!knob}" =~ ^[0-9]+$ ]]; then
+    echo "invalid $knob: need a whole number (train encode checks its range), got '${!knob}'" >&2
+    exit 2
+  fi
+done
 for knob in DENOISER_SHARDS RESTART_SHARDS SHAPE_SHARDS; do
   if ! [[ "${!knob}" =~ ^[1-9][0-9]*$ ]]; then
     echo "invalid $knob: need a whole number of batch slices, at least 1, got '${!knob}'" >&2
@@ -178,14 +194,35 @@ run data import --partnet-mobility "$OUT/synth" --out "$OUT/train" $IMPORT_FLAGS
 run train shape --data "$OUT/train" --out "$OUT/shape" --steps "$SHAPE_STEPS" --seed 0 \
   --decoder-backward "$SHAPE_BACKWARD" --batch-shards "$SHAPE_SHARDS" --eval-every 4000 \
   $SHAPE_BATCH $SHAPE_FLAGS
-common=(--data "$OUT/train" --shape "$OUT/shape" --out "$OUT/weights"
+# The decoder limits the shape IoU most (EVALUATION.md); cycles with the encoder frozen improve
+# it while the encoder, and with NAP's encoding every code, stays as the first prior made it.
+# The eikonal term keeps the decoder's field steep where guidance moves the codes: without it
+# guided scan completion aligns worse. After the first cycle (0.01) the 12,000-step prior's
+# fields are still flatter near the surface than its meshes (sqrt(E_pc)/D_pc 0.74 on guided
+# fits, against 0.94 for the weights before) and fits align 15 % worse; the second, stronger
+# cycle (0.03) brings that back to 0.92 (EVALUATION.md). Cycle i uses seed i - 1 (its query
+# draws), the i-th DECODER_EIKONAL and DECODER_WRONG_SIDE weights, and starts from the
+# previous run.
+last="$OUT/shape"
+if [ "$DECODER_STEPS" != 0 ]; then
+  for ((cycle = 1; cycle <= DECODER_CYCLES; cycle++)); do
+    # shellcheck disable=SC2086
+    run train shape --data "$OUT/train" --out "$OUT/shape_decoder$cycle" --steps "$DECODER_STEPS" \
+      --seed $((cycle - 1)) --init-from "$last" --freeze-encoder --lr 5e-4 \
+      --eikonal "${eikonal[$((cycle - 1))]}" --wrong-side "${wrong_side[$((cycle - 1))]}" \
+      --batch-shards "$SHAPE_SHARDS" $SHAPE_BATCH $SHAPE_FLAGS $DECODER_FLAGS
+    last="$OUT/shape_decoder$cycle"
+  done
+fi
+# Every part's code by the last decoder (the denoiser learns these; the report records the
+# encoding and the runs the prior continued, which the manifest keeps).
+run train encode --weights "$last" --data "$OUT/train" --out "$OUT/codes" \
+  --encoder-views "$ENCODER_VIEWS" --fit-steps "$FIT_STEPS" --fit-queries "$FIT_QUERIES"
+common=(--data "$OUT/train" --shape "$OUT/codes" --out "$OUT/weights"
         --batch-objects "$BATCH_OBJECTS" --noise-levels 4 --lr 5e-4
         --checkpoint-every "$CHECKPOINT_EVERY" --category-layers)
-# Only the weights' last state gets a retrieval codebook (≈ 1 min each): every denoiser run
-# but the last is continued by another, and the last one's decoder is replaced by the decoder
-# cycles when there are any (then the last install-shape builds it).
-last_codebook=(--no-codebook)
-if [ "$DECODER_STEPS" = 0 ] || [ "$DECODER_CYCLES" = 0 ]; then last_codebook=(); fi
+# Only the last denoiser run builds the retrieval codebook (≈ 1 min): every other one is
+# continued by another.
 # Stage 1: constant learning rate, no EMA.
 # shellcheck disable=SC2086
 run train diffusion "${common[@]}" --steps "$STAGE1" --lr-final-factor 1 --ema-decay 0 \
@@ -200,7 +237,7 @@ if [ "$STAGE2" != 0 ]; then
   run train diffusion "${common[@]}" "${decay[@]}" --stop-at "$STAGE2" --no-codebook $DENOISER_FLAGS
 fi
 decay_codebook=(--no-codebook)
-[ "${#restarts[@]}" = 0 ] && decay_codebook=("${last_codebook[@]}")
+[ "${#restarts[@]}" = 0 ] && decay_codebook=()
 # shellcheck disable=SC2086
 run train diffusion "${common[@]}" "${decay[@]}" --overlap-weight "$DECAY_OVERLAP" \
   "${decay_codebook[@]}" $DENOISER_FLAGS
@@ -211,34 +248,13 @@ run train diffusion "${common[@]}" "${decay[@]}" --overlap-weight "$DECAY_OVERLA
 prev=$STEPS
 for k in "${!restarts[@]}"; do
   cb=(--no-codebook)
-  [ "$k" = $((${#restarts[@]} - 1)) ] && cb=("${last_codebook[@]}")
+  [ "$k" = $((${#restarts[@]} - 1)) ] && cb=()
   # shellcheck disable=SC2086
   run train diffusion "${common[@]}" --steps "${restarts[$k]}" --lr-decay-start "$prev" \
     --lr-final-factor 0.1 --ema-decay 0.999 --resume --batch-shards "$RESTART_SHARDS" \
     --overlap-weight "${overlap[$k]:-0}" "${cb[@]}" $DENOISER_FLAGS
   prev=${restarts[$k]}
 done
-if [ "$DECODER_STEPS" != 0 ]; then
-  # The decoder limits the shape IoU most (EVALUATION.md); further cycles with the encoder
-  # frozen improve it while every code, and so the denoiser just trained, stays valid. The
-  # eikonal term keeps the decoder's field steep where guidance moves the codes: without it
-  # guided scan completion aligns worse. After the first cycle (0.01) the 12,000-step prior's
-  # fields are still flatter near the surface than its meshes (sqrt(E_pc)/D_pc 0.74 on guided
-  # fits, against 0.94 for the weights before) and fits align 15 % worse; the second, stronger
-  # cycle (0.03) brings that back to 0.92 (EVALUATION.md). Cycle i uses seed i - 1 (its query
-  # draws), the i-th DECODER_EIKONAL and DECODER_WRONG_SIDE weights, and starts from the
-  # decoder the previous cycle installed.
-  for ((cycle = 1; cycle <= DECODER_CYCLES; cycle++)); do
-    # shellcheck disable=SC2086
-    run train shape --data "$OUT/train" --out "$OUT/shape_decoder$cycle" --steps "$DECODER_STEPS" \
-      --seed $((cycle - 1)) --init-from "$OUT/weights" --freeze-encoder --lr 5e-4 \
-      --eikonal "${eikonal[$((cycle - 1))]}" --wrong-side "${wrong_side[$((cycle - 1))]}" \
-      --batch-shards "$SHAPE_SHARDS" $SHAPE_BATCH $SHAPE_FLAGS $DECODER_FLAGS
-    cb=(--no-codebook)
-    [ "$cycle" = "$DECODER_CYCLES" ] && cb=()
-    run train install-shape --shape "$OUT/shape_decoder$cycle" --weights "$OUT/weights" "${cb[@]}"
-  done
-fi
 if [ "$EVAL" = 1 ]; then
   run eval shape --weights "$OUT/weights" --data "$OUT/train" --parts 64 --write-manifest
   run eval generative --weights "$OUT/weights" --data "$OUT/train" --samples 48 --refs 48 \

@@ -167,6 +167,10 @@ pub fn encode(a: EncodeArgs) -> anyhow::Result<()> {
             let (manifest, path, file) = manifest_with_shape_prior(&a.weights)?;
             (manifest.training["shape"].clone(), path, file)
         };
+    let mut report = report;
+    if report.is_object() {
+        report["lineage"] = lineage(&a.weights, &report)?;
+    }
     let report = &report;
     if !report.is_object() {
         bail!(
@@ -207,6 +211,51 @@ pub fn encode(a: EncodeArgs) -> anyhow::Result<()> {
         a.out.display()
     );
     Ok(())
+}
+
+/// The runs a shape prior continued, for the manifest `train diffusion` writes from the
+/// encoded directory: `{"shape_base": the prior trained from scratch, "shape_cycles": the
+/// decoder cycles between it and this one, oldest first}`. A weights directory's manifest has
+/// them already (`install-shape` records them); a `train shape` directory's report names the
+/// weights it started from (`config.init_from`), whose directory's report is followed back to
+/// the run without one. A start whose report is gone ends the chain there.
+fn lineage(dir: &Path, report: &serde_json::Value) -> anyhow::Result<serde_json::Value> {
+    let manifest = dir.join("manifest.json");
+    if manifest.is_file() {
+        let text = std::fs::read_to_string(&manifest)
+            .with_context(|| format!("reading {}", manifest.display()))?;
+        let m: serde_json::Value = serde_json::from_str(&text)
+            .with_context(|| format!("parsing {}", manifest.display()))?;
+        return Ok(serde_json::json!({
+            "shape_base": m["training"]["shape_base"],
+            "shape_cycles": m["training"]["shape_cycles"],
+        }));
+    }
+    let mut chain = Vec::new();
+    let mut at = report.clone();
+    // A chain longer than this is a loop of directories, not a history.
+    for _ in 0..64 {
+        let Some(from) = at["config"]["init_from"].as_str().map(PathBuf::from) else {
+            break;
+        };
+        let prev = from
+            .parent()
+            .map(|d| d.join(physnap::train::shape::REPORT_FILE));
+        let Some(prev) = prev.filter(|p| p.is_file()) else {
+            break;
+        };
+        let text = std::fs::read_to_string(&prev)
+            .with_context(|| format!("reading {}", prev.display()))?;
+        at = serde_json::from_str(&text).with_context(|| format!("parsing {}", prev.display()))?;
+        chain.push(at.clone());
+    }
+    // chain: newest first; its last entry is the base.
+    let base = chain.pop().unwrap_or(serde_json::Value::Null);
+    chain.reverse();
+    Ok(serde_json::json!({
+        "shape_base": base,
+        "shape_cycles": if chain.is_empty() { serde_json::Value::Null } else { chain.into() },
+    }))
 }
 
 pub fn install_shape(a: InstallShapeArgs) -> anyhow::Result<()> {
@@ -373,10 +422,25 @@ pub fn diffusion(a: DiffusionArgs) -> anyhow::Result<()> {
             .map(|s| s.to_string())
             .collect(),
         data: serde_json::json!({ "dataset": a.data.display().to_string(), "synth": read(&a.data.join("../synth/synth.json")) }),
-        training: serde_json::json!({
-            "shape": read(&a.shape.join("shape_train.json")),
-            "diffusion": read(&a.out.join("diffusion_train.json")),
-        }),
+        training: {
+            // `train encode` records the runs its prior continued under "lineage"; the
+            // manifest keeps them beside it, as `install-shape` does.
+            let mut shape = read(&a.shape.join("shape_train.json"));
+            let lineage = shape
+                .as_object_mut()
+                .and_then(|o| o.remove("lineage"))
+                .unwrap_or_default();
+            let mut t = serde_json::json!({
+                "shape": shape,
+                "diffusion": read(&a.out.join("diffusion_train.json")),
+            });
+            for k in ["shape_base", "shape_cycles"] {
+                if !lineage[k].is_null() {
+                    t[k] = lineage[k].clone();
+                }
+            }
+            t
+        },
         codebook: None,
         metrics: serde_json::Value::Null,
     };

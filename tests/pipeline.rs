@@ -1074,13 +1074,20 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     );
     // The recipe's denoiser adds its category to every graph layer, as the shipped one does.
     assert_eq!(m["denoiser"]["config"]["category_layers"], true, "{m:#}");
-    // Then two decoder cycles, encoder frozen, are installed over the first prior, each
-    // continuing the last; the manifest keeps the whole lineage.
-    assert_eq!(
-        err.matches("+ physnap train install-shape").count(),
-        2,
+    // Two decoder cycles, encoder frozen, continue the first prior, each the last, before the
+    // denoiser; `train encode` makes the codes from the last one by NAP's encoding (as
+    // shipped), and the manifest keeps the whole lineage.
+    assert!(!err.contains("+ physnap train install-shape"), "{err}");
+    assert!(
+        err.contains("train encode --weights") && err.contains("--encoder-views 1 --fit-steps 0"),
         "{err}"
     );
+    assert!(
+        err.find("--out {}/shape_decoder2".replace("{}", s(&out)).as_str())
+            < err.find("+ physnap train diffusion"),
+        "cycles before the denoiser: {err}"
+    );
+    assert!(m["training"]["shape"]["encoding"].is_null(), "{m:#}");
     assert_eq!(
         m["training"]["shape"]["config"]["freeze_encoder"], true,
         "{m:#}"
@@ -1120,9 +1127,9 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     assert_eq!(m["training"]["shape"]["config"]["eikonal"], 0.03, "{m:#}");
     assert_eq!(m["training"]["shape"]["config"]["wrong_side"], 0.0, "{m:#}");
     assert!(err.contains("--wrong-side 0 "), "{err}");
-    // Only the last state gets a retrieval codebook: the five denoiser runs and the first
-    // install skip theirs (the recipe's time budget), the second install builds it (above).
-    assert_eq!(err.matches("--no-codebook").count(), 6, "{err}");
+    // Only the last state gets a retrieval codebook: the first four denoiser runs skip
+    // theirs (the recipe's time budget), the last builds it (above).
+    assert_eq!(err.matches("--no-codebook").count(), 4, "{err}");
     // Installing without one drops the stale codebook, file and manifest entry, and says how
     // to build it; `train codebook` puts it back.
     let d2 = out.join("shape_decoder2");
@@ -1172,6 +1179,8 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         ),
         (&[("DECAY_OVERLAP", "-1")][..], "DECAY_OVERLAP"),
         (&[("SHAPE_SHARDS", "0")][..], "SHAPE_SHARDS"),
+        (&[("FIT_STEPS", "many")][..], "FIT_STEPS"),
+        (&[("ENCODER_VIEWS", "-2")][..], "ENCODER_VIEWS"),
     ] {
         let o = Command::new("bash")
             .arg(concat!(
@@ -1207,6 +1216,9 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             ("DECODER_WRONG_SIDE", "10"),
             ("DECAY_OVERLAP", "2"),
             ("SHAPE_SHARDS", "1"),
+            ("ENCODER_VIEWS", "2"),
+            ("FIT_STEPS", "2"),
+            ("FIT_QUERIES", "32"),
         ],
     );
     let err = String::from_utf8_lossy(&o.stderr);
@@ -1232,6 +1244,13 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         "{m:#}"
     );
     assert!(m["training"]["shape_cycles"].is_null(), "one cycle: {m:#}");
+    // The codes the denoiser learned were made by the encoding the knobs asked for, and the
+    // manifest says so (eval shape measures that encoding by default).
+    assert_eq!(
+        m["training"]["shape"]["encoding"],
+        serde_json::json!({"views": 2, "fit_steps": 2, "fit_queries": 32, "fit_lr": 0.01}),
+        "{m:#}"
+    );
     assert_eq!(
         m["training"]["shape_base"]["config"]["batch_shards"], 1,
         "{m:#}"

@@ -1104,7 +1104,7 @@ impl Encoding {
 }
 
 /// Adam learning rate of [`fit_codes`].
-pub const FIT_LR: f32 = 1e-2;
+pub const FIT_LR: f64 = 1e-2;
 
 /// Codes [P × F] of P parts by `enc` ([`Encoding`]): `surface` holds each part's `enc.views`
 /// × `s` encoder points in a row, `fit` each part's fit samples (unused without fitting).
@@ -1173,7 +1173,7 @@ fn fit_codes(
                 let k = p * f + i;
                 m[k] = b1 * m[k] + (1.0 - b1) * dz;
                 v[k] = b2 * v[k] + (1.0 - b2) * dz * dz;
-                codes[k] -= FIT_LR * (m[k] / c1) / ((v[k] / c2).sqrt() + eps);
+                codes[k] -= FIT_LR as f32 * (m[k] / c1) / ((v[k] / c2).sqrt() + eps);
             }
         }
     }

@@ -447,7 +447,7 @@ impl HostDecoder {
 
     /// [`HostDecoder::weight_grads`] without the weights' gradients (`layers` is empty): the
     /// values and ∂L/∂(code features) alone, what fitting a code with the decoder frozen
-    /// needs, at about two thirds of the cost.
+    /// needs: the backward pass skips every weight-gradient product.
     ///
     /// # Panics
     /// As [`HostDecoder::weight_grads`].

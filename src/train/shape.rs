@@ -2941,16 +2941,7 @@ mod tests {
     /// encoding and reads it back, and a bad field is refused by name, limit and value.
     #[test]
     fn encodings_average_views_fit_per_part_and_are_recorded() {
-        let data = tiny_dataset(13);
-        let train = data.path().join("train");
-        let out = data.path().join("run");
-        let cfg = ShapeTrainConfig {
-            steps: 20,
-            eval_every: 0,
-            checkpoint_every: 0,
-            ..tiny_config()
-        };
-        train_shape(&train, &cfg, &out, &mut |_| {}).unwrap();
+        let (data, train, cfg, out) = ten_step_prior(13);
         let (model, _, report) = load_shape_dir(&out, &cpu()).unwrap();
         let all = read_index(&train).unwrap();
         let id = all[0].id.clone();

@@ -218,7 +218,8 @@ pub fn encode(a: EncodeArgs) -> anyhow::Result<()> {
 /// decoder cycles between it and this one, oldest first}`. A weights directory's manifest has
 /// them already (`install-shape` records them); a `train shape` directory's report names the
 /// weights it started from (`config.init_from`), whose directory's report is followed back to
-/// the run without one. A start whose report is gone ends the chain there.
+/// the run without one, or whose weights directory's manifest ends the chain with the history
+/// it keeps. A start whose report is gone (or a relative path from elsewhere) ends it there.
 fn lineage(dir: &Path, report: &serde_json::Value) -> anyhow::Result<serde_json::Value> {
     let manifest = dir.join("manifest.json");
     if manifest.is_file() {
@@ -238,12 +239,29 @@ fn lineage(dir: &Path, report: &serde_json::Value) -> anyhow::Result<serde_json:
         let Some(from) = at["config"]["init_from"].as_str().map(PathBuf::from) else {
             break;
         };
-        let prev = from
-            .parent()
-            .map(|d| d.join(physnap::train::shape::REPORT_FILE));
-        let Some(prev) = prev.filter(|p| p.is_file()) else {
+        let Some(dir) = from.parent() else { break };
+        let weights = dir.join("manifest.json");
+        if weights.is_file() {
+            // A weights directory (a cycle trained on installed weights): its prior, then the
+            // history its manifest keeps, newest first.
+            let text = std::fs::read_to_string(&weights)
+                .with_context(|| format!("reading {}", weights.display()))?;
+            let m: serde_json::Value = serde_json::from_str(&text)
+                .with_context(|| format!("parsing {}", weights.display()))?;
+            let t = &m["training"];
+            chain.push(t["shape"].clone());
+            if let Some(cycles) = t["shape_cycles"].as_array() {
+                chain.extend(cycles.iter().rev().cloned());
+            }
+            if !t["shape_base"].is_null() {
+                chain.push(t["shape_base"].clone());
+            }
             break;
-        };
+        }
+        let prev = dir.join(physnap::train::shape::REPORT_FILE);
+        if !prev.is_file() {
+            break;
+        }
         let text = std::fs::read_to_string(&prev)
             .with_context(|| format!("reading {}", prev.display()))?;
         at = serde_json::from_str(&text).with_context(|| format!("parsing {}", prev.display()))?;

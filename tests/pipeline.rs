@@ -1130,6 +1130,50 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     // Only the last state gets a retrieval codebook: the first four denoiser runs skip
     // theirs (the recipe's time budget), the last builds it (above).
     assert_eq!(err.matches("--no-codebook").count(), 4, "{err}");
+    // A cycle trained on the weights directory itself: `train encode` of it follows its start
+    // into the manifest and keeps that history (the first prior, then both cycles).
+    let c3 = out.join("cycle_on_weights");
+    ok(&[
+        "train",
+        "shape",
+        "--data",
+        s(&out.join("train")),
+        "--out",
+        s(&c3),
+        "--steps",
+        "1",
+        "--init-from",
+        s(&w),
+        "--freeze-encoder",
+        "--batch-parts",
+        "4",
+        "--queries-per-part",
+        "64",
+    ]);
+    let codes3 = out.join("codes3");
+    ok(&[
+        "train",
+        "encode",
+        "--weights",
+        s(&c3),
+        "--data",
+        s(&out.join("train")),
+        "--out",
+        s(&codes3),
+    ]);
+    let lineage = &read(&codes3.join("shape_train.json"))["lineage"];
+    assert_eq!(lineage["shape_base"]["steps"], 4, "{lineage:#}");
+    let seeds: Vec<_> = lineage["shape_cycles"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["config"]["seed"].clone())
+        .collect();
+    assert_eq!(
+        seeds,
+        [serde_json::json!(0), serde_json::json!(1)],
+        "{lineage:#}"
+    );
     // Installing without one drops the stale codebook, file and manifest entry, and says how
     // to build it; `train codebook` puts it back.
     let d2 = out.join("shape_decoder2");

@@ -157,10 +157,7 @@ pub fn encode(a: EncodeArgs) -> anyhow::Result<()> {
     let shape_report = a.weights.join("shape_train.json");
     let (report, path, file) =
         if !a.weights.join("manifest.json").is_file() && shape_report.is_file() {
-            let text = std::fs::read_to_string(&shape_report)
-                .with_context(|| format!("reading {}", shape_report.display()))?;
-            let report: serde_json::Value = serde_json::from_str(&text)
-                .with_context(|| format!("parsing {}", shape_report.display()))?;
+            let report = read_json(&shape_report)?;
             let file = a.weights.join(physnap::train::shape::WEIGHTS_FILE);
             (report, shape_report, file)
         } else {
@@ -213,6 +210,13 @@ pub fn encode(a: EncodeArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// A JSON file, with its path in the error.
+fn read_json(path: &Path) -> anyhow::Result<serde_json::Value> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))
+}
+
 /// The runs a shape prior continued, for the manifest `train diffusion` writes from the
 /// encoded directory: `{"shape_base": the prior trained from scratch, "shape_cycles": the
 /// decoder cycles between it and this one, oldest first}`. A weights directory's manifest has
@@ -223,10 +227,7 @@ pub fn encode(a: EncodeArgs) -> anyhow::Result<()> {
 fn lineage(dir: &Path, report: &serde_json::Value) -> anyhow::Result<serde_json::Value> {
     let manifest = dir.join("manifest.json");
     if manifest.is_file() {
-        let text = std::fs::read_to_string(&manifest)
-            .with_context(|| format!("reading {}", manifest.display()))?;
-        let m: serde_json::Value = serde_json::from_str(&text)
-            .with_context(|| format!("parsing {}", manifest.display()))?;
+        let m = read_json(&manifest)?;
         return Ok(serde_json::json!({
             "shape_base": m["training"]["shape_base"],
             "shape_cycles": m["training"]["shape_cycles"],
@@ -244,10 +245,7 @@ fn lineage(dir: &Path, report: &serde_json::Value) -> anyhow::Result<serde_json:
         if weights.is_file() {
             // A weights directory (a cycle trained on installed weights): its prior, then the
             // history its manifest keeps, newest first.
-            let text = std::fs::read_to_string(&weights)
-                .with_context(|| format!("reading {}", weights.display()))?;
-            let m: serde_json::Value = serde_json::from_str(&text)
-                .with_context(|| format!("parsing {}", weights.display()))?;
+            let m = read_json(&weights)?;
             let t = &m["training"];
             chain.push(t["shape"].clone());
             if let Some(cycles) = t["shape_cycles"].as_array() {
@@ -262,9 +260,7 @@ fn lineage(dir: &Path, report: &serde_json::Value) -> anyhow::Result<serde_json:
         if !prev.is_file() {
             break;
         }
-        let text = std::fs::read_to_string(&prev)
-            .with_context(|| format!("reading {}", prev.display()))?;
-        at = serde_json::from_str(&text).with_context(|| format!("parsing {}", prev.display()))?;
+        at = read_json(&prev)?;
         chain.push(at.clone());
     }
     // chain: newest first; its last entry is the base.

@@ -1152,18 +1152,19 @@ fn fit_codes(
         .flat_map(|p| p.queries.chunks_exact(3).map(|c| [c[0], c[1], c[2]]))
         .collect();
     let tgt: Vec<f32> = fit.iter().flat_map(|p| p.targets.iter().copied()).collect();
-    // Row r's part and the 1 / n of its mean.
-    let (idx, inv_n): (Vec<usize>, Vec<f32>) = fit
+    // Row r's part, and each part's 1 / n of its mean.
+    let idx: Vec<usize> = fit
         .iter()
         .enumerate()
-        .flat_map(|(i, p)| std::iter::repeat_n((i, 1.0 / p.targets.len() as f32), p.targets.len()))
-        .unzip();
+        .flat_map(|(i, p)| std::iter::repeat_n(i, p.targets.len()))
+        .collect();
+    let inv_n: Vec<f32> = fit.iter().map(|p| 1.0 / p.targets.len() as f32).collect();
     let (mut m, mut v) = (vec![0.0f32; codes.len()], vec![0.0f32; codes.len()]);
     let (b1, b2, eps) = (0.9f32, 0.999f32, 1e-8f32);
     for t in 1..=steps {
         let features = host.code_features(&codes);
         let g = host.feature_grads(&pts, &features, &idx, &|r, y| {
-            (y - tgt[r]).signum() * inv_n[r]
+            (y - tgt[r]).signum() * inv_n[idx[r]]
         });
         let (c1, c2) = (1.0 - b1.powi(t as i32), 1.0 - b2.powi(t as i32));
         for (p, dh) in g.d_features.chunks_exact(fw).enumerate() {
@@ -1383,19 +1384,16 @@ fn encode_refs(
     let loaded: Vec<(Vec<f32>, FitSamples)> = refs
         .par_iter()
         .map(|p| {
-            let (_, pts) = read_rows(&p.file(data, "surface"), 3)?;
-            let surf = first_points(&pts, surface_points * enc.views);
-            let fit = if enc.fit_steps > 0 {
-                let samples = PartSamples {
-                    uniform: read_rows(&p.file(data, "uniform"), 4)?.1,
-                    near: read_rows(&p.file(data, "near"), 4)?.1,
-                    surface: Vec::new(),
-                };
-                first_samples(&samples, enc.fit_queries)
-            } else {
-                FitSamples::default()
-            };
-            Ok((surf, fit))
+            let n = surface_points * enc.views;
+            if enc.fit_steps == 0 {
+                let (_, pts) = read_rows(&p.file(data, "surface"), 3)?;
+                return Ok((first_points(&pts, n), FitSamples::default()));
+            }
+            let s = load_part(data, p)?;
+            Ok((
+                first_points(&s.surface, n),
+                first_samples(&s, enc.fit_queries),
+            ))
         })
         .collect::<Result<_, TrainError>>()?;
     let surface: Vec<f32> = loaded.iter().flat_map(|(s, _)| s.iter().copied()).collect();
@@ -2974,11 +2972,10 @@ mod tests {
             fit_queries: 64,
         };
         let fitted = encode_object_parts(&model, &train, &id, n, s, &fit).unwrap();
-        let report_doc: Value = report.clone();
         let dir = data.path().join("fitted");
         let rep = encode_shape_dir(
             &out.join(WEIGHTS_FILE),
-            &report_doc,
+            &report,
             &train,
             &dir,
             &fit,

@@ -548,6 +548,11 @@ struct DiffusionArgs {
     /// The box-overlap penalty counts only samples with t below this (1..=500).
     #[arg(long, env = "PHYSNAP_DIFFUSION_OVERLAP_MAX_T", default_value_t = physnap::train::diffusion::DEFAULT_OVERLAP_MAX_T)]
     overlap_max_t: usize,
+    /// Layout gain G: the part boxes' and centres' feature scales are divided by G, so the
+    /// layout spans G times NAP's max-abs range in model space and survives G times as much
+    /// noise (0.25..=8; 1 = NAP). Recorded in the manifest's feature scales.
+    #[arg(long, env = "PHYSNAP_DIFFUSION_LAYOUT_GAIN", default_value_t = 1.0)]
+    layout_gain: f64,
     /// Share of training samples that see the "no category" row instead of their category
     /// (0..=1): what classifier-free category guidance and unconditional sampling use.
     #[arg(long, env = "PHYSNAP_DIFFUSION_CATEGORY_DROPOUT", default_value_t = physnap::train::diffusion::DEFAULT_CATEGORY_DROPOUT)]

@@ -396,6 +396,7 @@ pub fn diffusion(a: DiffusionArgs) -> anyhow::Result<()> {
         high_noise_cap: a.high_noise_cap,
         overlap_weight: a.overlap_weight,
         overlap_max_t: a.overlap_max_t,
+        layout_gain: a.layout_gain,
         category_dropout: a.category_dropout,
         batch_shards: a.batch_shards,
         compute,
@@ -430,7 +431,7 @@ pub fn diffusion(a: DiffusionArgs) -> anyhow::Result<()> {
             sha256: report.sha256.clone(),
             config: model,
         },
-        feature_scales: data.scales.clone(),
+        feature_scales: report.scales.clone(),
         categories: physnap::data::categories::CATEGORIES
             .iter()
             .map(|s| s.to_string())

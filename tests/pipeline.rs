@@ -247,6 +247,59 @@ fn synth_import_train_generate() {
         err.contains("category_dropout") && err.contains("1.5"),
         "{err}"
     );
+    // --layout-gain: the manifest carries the scales the run trained in (box and centre ÷ G),
+    // which is all sampling reads; an out-of-range gain is refused by name.
+    let gained = root.path().join("gained");
+    let run = |gain: &str, out: &Path| {
+        physnap(&[
+            "train",
+            "diffusion",
+            "--data",
+            s(&data),
+            "--shape",
+            s(&shape),
+            "--out",
+            s(out),
+            "--steps",
+            "2",
+            "--batch-objects",
+            "2",
+            "--noise-levels",
+            "2",
+            "--width",
+            "32",
+            "--layers",
+            "1",
+            "--no-codebook",
+            "--layout-gain",
+            gain,
+        ])
+    };
+    assert!(run("2", &gained).status.success());
+    let g: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(gained.join("manifest.json")).unwrap())
+            .unwrap();
+    let node = |m: &serde_json::Value, c: usize| m["feature_scales"]["node"][c].as_f64().unwrap();
+    for c in 0..10 {
+        let want = if (1..7).contains(&c) {
+            node(&manifest, c) / 2.0
+        } else {
+            node(&manifest, c)
+        };
+        assert!(
+            (node(&g, c) - want).abs() <= 1e-6 * want,
+            "channel {c}: {g:#}"
+        );
+    }
+    let o = run("9", &root.path().join("refused_gain"));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success()
+            && err.contains("layout_gain")
+            && err.contains("9")
+            && err.contains("[0.25, 8]"),
+        "{err}"
+    );
     assert_eq!(manifest["categories"].as_array().unwrap().len(), 46);
     assert_eq!(manifest["denoiser"]["sha256"].as_str().unwrap().len(), 64);
     assert_eq!(manifest["shape_prior"]["config"]["decoder_hidden"], 48);

@@ -295,6 +295,17 @@ impl FeatureScales {
         FeatureScales { node, edge }
     }
 
+    /// These scales with the box and centre channels divided by `gain`: the layout then spans
+    /// `gain` times as much of model space, so the forward process takes `gain` times as much
+    /// noise to bury it (see `DiffusionTrainConfig::layout_gain`). 1 leaves them unchanged.
+    pub fn with_layout_gain(&self, gain: f32) -> Self {
+        let mut s = self.clone();
+        for v in &mut s.node[node_ch::BOX..node_ch::LATENT] {
+            *v /= gain;
+        }
+        s
+    }
+
     /// Check lengths and positivity.
     pub fn validate(&self) -> CoreResult<()> {
         if self.node.len() != NODE_DIM || self.edge.len() != EDGE_DIM {

@@ -50,6 +50,25 @@
 //! gap. The term is one-sided: contact, nesting and gaps that the data has cost nothing; only
 //! overlap beyond the data's does. L = L_ε + L_overlap.
 //!
+//! Layout gain (`layout_gain` = G; 1 by default, i.e. NAP's scaling): NAP scales every channel
+//! by its max-abs over the training split (§1.7), which leaves the part boxes and centres with
+//! a standard deviation of only 0.17–0.32 in model space against unit noise. With the linear
+//! β schedule the noise outgrows that spread (σ_t / √ᾱ_t > 0.17–0.32) by t = 23–61 of 1000,
+//! so a sample settles where its parts sit in the last few per cent of the reverse steps, and
+//! two parts of one size that the data keeps a few centimetres apart (a suitcase's two shells
+//! at ±0.07 m, 0.15 in model space, buried by t ≈ 20) come out averaged on top of each other.
+//! G divides the box and centre scales:
+//!
+//! ```text
+//! model value = raw value / (scale_c / G)   for c in the box and centre channels
+//! ```
+//!
+//! so the layout spans G times as much of model space and stays readable up to G times the
+//! noise (G = 2: a spread of 0.35–0.65, buried at t = 61–144; images in [−1, 1], what the
+//! schedule was made for, have about 0.5). The scales the run trains in (with G applied) are what `diffusion_train.json` and
+//! the manifest record, so sampling needs nothing else; a resume whose scales differ from the
+//! recorded ones (another G, codebook or data set) is refused.
+//!
 //! Category conditioning: each sample carries its object's category index, replaced
 //! by the "no category" row with probability `category_dropout`, so one model serves both the
 //! category-aware and the unconditional mode.
@@ -141,6 +160,10 @@ pub struct DiffusionTrainConfig {
     pub overlap_weight: f64,
     /// The penalty counts only samples with t below this (x̂₀ is a blur at high noise).
     pub overlap_max_t: usize,
+    /// Layout gain G: the box and centre channels' feature scales are divided by G, so in model
+    /// space the part layout spans G times NAP's max-abs range (module documentation). 1 =
+    /// NAP's scaling.
+    pub layout_gain: f64,
     /// Shards each step's batch is split into: their forward and backward passes run in
     /// parallel on the rayon pool and their gradients are summed (see the module documentation).
     pub batch_shards: usize,
@@ -200,6 +223,7 @@ impl Default for DiffusionTrainConfig {
             high_noise_cap: 1.0,
             overlap_weight: 0.0,
             overlap_max_t: DEFAULT_OVERLAP_MAX_T,
+            layout_gain: 1.0,
             batch_shards: 2,
             compute: Compute::Cpu,
         }
@@ -208,6 +232,11 @@ impl Default for DiffusionTrainConfig {
 
 /// Default share of training samples that see the "no category" row.
 pub const DEFAULT_CATEGORY_DROPOUT: f64 = 0.2;
+
+/// Smallest accepted `layout_gain`.
+pub const MIN_LAYOUT_GAIN: f64 = 0.25;
+/// Largest accepted `layout_gain`.
+pub const MAX_LAYOUT_GAIN: f64 = 8.0;
 
 /// Default `overlap_max_t`.
 pub const DEFAULT_OVERLAP_MAX_T: usize = 300;
@@ -549,6 +578,9 @@ pub struct DiffusionTrainReport {
     pub weights: PathBuf,
     /// sha256 of the weights file.
     pub sha256: String,
+    /// The feature scales the run trained in (the data's, with `layout_gain` applied): what the
+    /// manifest must record.
+    pub scales: FeatureScales,
 }
 
 /// Standard-normal noise for a batch of `b` graphs, nodes first then edges, drawn from `rng`.
@@ -574,6 +606,38 @@ pub(crate) fn random_slots(rng: &mut Rng) -> [usize; K] {
         perm.swap(i, rng.int(0, i));
     }
     perm
+}
+
+/// Refuse to resume a run whose recorded feature scales (`diffusion_train.json`, when there
+/// is one) differ from this run's: another codebook, data set or `layout_gain` would put the
+/// same weights in another model space. A run directory without the record resumes.
+fn check_resumed_scales(record: &Path, scales: &FeatureScales) -> Result<(), TrainError> {
+    if !record.is_file() {
+        return Ok(());
+    }
+    let doc = read_json(record)?;
+    for (name, now) in [("node", &scales.node), ("edge", &scales.edge)] {
+        let Some(was) = doc["feature_scales"][name].as_array() else {
+            continue;
+        };
+        let was: Vec<f32> = was
+            .iter()
+            .map(|v| v.as_f64().unwrap_or(f64::NAN) as f32)
+            .collect();
+        if let Some(k) = (0..now.len()).find(|&k| was.get(k) != Some(&now[k])) {
+            return Err(TrainError::Config {
+                field: format!("feature_scales.{name}[{k}]"),
+                limit: format!(
+                    "the resumed run's ({}, recorded in {}; same codebook, data and layout_gain {})",
+                    was.get(k).map_or("absent".into(), |v| v.to_string()),
+                    record.display(),
+                    doc["layout_gain"].as_f64().unwrap_or(1.0)
+                ),
+                value: now[k].to_string(),
+            });
+        }
+    }
+    Ok(())
 }
 
 /// Train (or resume training) the denoiser; writes `denoiser.safetensors`, `checkpoint.json`
@@ -649,6 +713,12 @@ pub fn train_diffusion(
             cfg.overlap_max_t.to_string(),
         ),
         (
+            "layout_gain",
+            (MIN_LAYOUT_GAIN..=MAX_LAYOUT_GAIN).contains(&cfg.layout_gain),
+            "within [0.25, 8] (1 = NAP's scaling)",
+            cfg.layout_gain.to_string(),
+        ),
+        (
             "batch_shards",
             (1..=cfg.batch_objects * cfg.noise_levels).contains(&cfg.batch_shards),
             "within 1..=batch_objects × noise_levels",
@@ -669,6 +739,7 @@ pub fn train_diffusion(
             });
         }
     }
+    let scales = data.scales.with_layout_gain(cfg.layout_gain as f32);
     std::fs::create_dir_all(out).map_err(|e| data_err(out, e.to_string()))?;
     let device = cfg.compute.autodiff();
     let schedule = Schedule::default();
@@ -682,6 +753,7 @@ pub fn train_diffusion(
     let mut prior_wall = 0.0f64;
     let mut ema = f64::NAN;
     if resume && ckpt_path.is_file() {
+        check_resumed_scales(&out.join("diffusion_train.json"), &scales)?;
         let ck = read_json(&ckpt_path)?;
         start = ck["step"].as_u64().unwrap_or(0) as usize;
         prior_wall = ck["wall_seconds_total"].as_f64().unwrap_or(0.0);
@@ -722,7 +794,7 @@ pub fn train_diffusion(
                 .permuted(&random_slots(&mut rng))
                 .map_err(TrainError::Core)?;
             let pairs = overlap_on.then(|| pair_targets(&raw));
-            let g = raw.scaled(&data.scales);
+            let g = raw.scaled(&scales);
             for _ in 0..cfg.noise_levels {
                 x0.push(g.clone());
                 let t = rng.int(0, schedule.len() - 1);
@@ -768,7 +840,7 @@ pub fn train_diffusion(
                 mask: pairs(std::mem::take(&mut mask)),
                 scales: Tensor::<3>::from_data(
                     TensorData::new(
-                        data.scales.node[node_ch::BOX..node_ch::LATENT].to_vec(),
+                        scales.node[node_ch::BOX..node_ch::LATENT].to_vec(),
                         [1, 1, node_ch::LATENT - node_ch::BOX],
                     ),
                     &device,
@@ -856,7 +928,8 @@ pub fn train_diffusion(
         "min_snr_gamma": cfg.min_snr_gamma, "high_noise_cap": cfg.high_noise_cap,
         "overlap_weight": cfg.overlap_weight, "overlap_max_t": cfg.overlap_max_t,
         "batch_shards": cfg.batch_shards,
-        "feature_scales": { "node": data.scales.node, "edge": data.scales.edge },
+        "layout_gain": cfg.layout_gain,
+        "feature_scales": { "node": &scales.node, "edge": &scales.edge },
         "categories": CATEGORIES.to_vec(), "train_objects": data.graphs.len(), "sha256": sha,
     });
     let path = out.join("diffusion_train.json");
@@ -872,6 +945,7 @@ pub fn train_diffusion(
         final_loss: ema,
         weights: weights_path,
         sha256: sha,
+        scales,
     })
 }
 
@@ -939,6 +1013,7 @@ pub(crate) mod tests {
             high_noise_cap: 1.0,
             overlap_weight: 0.0,
             overlap_max_t: DEFAULT_OVERLAP_MAX_T,
+            layout_gain: 1.0,
             batch_shards: 2,
             compute: crate::model::Compute::Cpu,
         }
@@ -1016,6 +1091,60 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn layout_gain_scales_the_layout_channels_and_a_resume_must_keep_it() {
+        let data = tiny_data();
+        let dir = tempfile::tempdir().unwrap();
+        let gained = DiffusionTrainConfig {
+            layout_gain: 2.0,
+            ..tiny_config(4)
+        };
+        let r = train_diffusion(&data, &gained, dir.path(), false, &mut |_| {}).unwrap();
+        // Box and centre scales halved, existence, codes and edges as the data's.
+        for c in 0..NODE_DIM {
+            let want = if (node_ch::BOX..node_ch::LATENT).contains(&c) {
+                data.scales.node[c] / 2.0
+            } else {
+                data.scales.node[c]
+            };
+            assert_eq!(r.scales.node[c], want, "node channel {c}");
+        }
+        assert_eq!(r.scales.edge, data.scales.edge);
+        // The run's record carries them (the manifest takes `r.scales`) and the gain.
+        let summary: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(dir.path().join("diffusion_train.json")).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(summary["layout_gain"], 2.0);
+        assert_eq!(
+            summary["feature_scales"]["node"][node_ch::CENTER]
+                .as_f64()
+                .unwrap() as f32,
+            r.scales.node[node_ch::CENTER]
+        );
+        // Resuming with NAP's scaling would train the same weights in another model space.
+        let e = train_diffusion(&data, &tiny_config(8), dir.path(), true, &mut |_| {})
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            e.contains(&format!("feature_scales.node[{}]", node_ch::BOX))
+                && e.contains("layout_gain 2"),
+            "{e}"
+        );
+        // With the same gain it continues.
+        let gained8 = DiffusionTrainConfig {
+            layout_gain: 2.0,
+            ..tiny_config(8)
+        };
+        let mut steps = Vec::new();
+        train_diffusion(&data, &gained8, dir.path(), true, &mut |p| {
+            steps.push(p.step)
+        })
+        .unwrap();
+        assert_eq!((steps.first(), steps.last()), (Some(&5), Some(&8)));
+    }
+
+    #[test]
     fn bad_config_values_are_named() {
         let err = |cfg: DiffusionTrainConfig| {
             let dir = tempfile::tempdir().unwrap();
@@ -1026,7 +1155,21 @@ pub(crate) mod tests {
         };
         // Each bad value, and what its error must name: the field, the value, the limit.
         let base = || tiny_config(10);
-        let cases: [(DiffusionTrainConfig, &[&str]); 7] = [
+        let cases: [(DiffusionTrainConfig, &[&str]); 9] = [
+            (
+                DiffusionTrainConfig {
+                    layout_gain: 0.2,
+                    ..base()
+                },
+                &["layout_gain", "0.2", "[0.25, 8]"],
+            ),
+            (
+                DiffusionTrainConfig {
+                    layout_gain: f64::NAN,
+                    ..base()
+                },
+                &["layout_gain", "NaN"],
+            ),
             (
                 DiffusionTrainConfig {
                     category_dropout: 1.5,

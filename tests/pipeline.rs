@@ -197,61 +197,9 @@ fn synth_import_train_generate() {
     ] {
         assert!(shape.join(f).is_file(), "missing {f}");
     }
-    ok(&[
-        "train",
-        "diffusion",
-        "--data",
-        s(&data),
-        "--shape",
-        s(&shape),
-        "--out",
-        s(&weights),
-        "--steps",
-        "4",
-        "--batch-objects",
-        "2",
-        "--noise-levels",
-        "2",
-        "--width",
-        "32",
-        "--layers",
-        "1",
-        "--category-dropout",
-        "0.1",
-    ]);
-    let manifest: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(weights.join("manifest.json")).unwrap())
-            .unwrap();
-    assert_eq!(manifest["format"], "physnap.weights/v1");
-    assert_eq!(
-        manifest["training"]["diffusion"]["category_dropout"], 0.1,
-        "{manifest:#}"
-    );
-    let o = physnap(&[
-        "train",
-        "diffusion",
-        "--data",
-        s(&data),
-        "--shape",
-        s(&shape),
-        "--out",
-        s(&root.path().join("refused")),
-        "--steps",
-        "4",
-        "--category-dropout",
-        "1.5",
-    ]);
-    assert!(!o.status.success());
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(
-        err.contains("category_dropout") && err.contains("1.5"),
-        "{err}"
-    );
-    // --layout-gain: the manifest carries the scales the run trained in (box and centre ÷ G),
-    // which is all sampling reads; an out-of-range gain is refused by name.
-    let gained = root.path().join("gained");
-    let run = |gain: &str, out: &Path| {
-        physnap(&[
+    // A tiny denoiser on that codebook: `steps` steps into `out`, with `extra` flags.
+    let diffusion = |out: &Path, steps: &str, extra: &[&str]| {
+        let mut args = vec![
             "train",
             "diffusion",
             "--data",
@@ -261,7 +209,7 @@ fn synth_import_train_generate() {
             "--out",
             s(out),
             "--steps",
-            "2",
+            steps,
             "--batch-objects",
             "2",
             "--noise-levels",
@@ -270,11 +218,36 @@ fn synth_import_train_generate() {
             "32",
             "--layers",
             "1",
-            "--no-codebook",
-            "--layout-gain",
-            gain,
-        ])
+        ];
+        args.extend_from_slice(extra);
+        physnap(&args)
     };
+    let o = diffusion(&weights, "4", &["--category-dropout", "0.1"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(weights.join("manifest.json")).unwrap())
+            .unwrap();
+    assert_eq!(manifest["format"], "physnap.weights/v1");
+    assert_eq!(
+        manifest["training"]["diffusion"]["category_dropout"], 0.1,
+        "{manifest:#}"
+    );
+    let o = diffusion(
+        &root.path().join("refused"),
+        "4",
+        &["--category-dropout", "1.5"],
+    );
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("category_dropout") && err.contains("1.5"),
+        "{err}"
+    );
+    // --layout-gain: the manifest carries the scales the run trained in (box and centre ÷ G),
+    // which is all sampling reads; an out-of-range gain is refused by name.
+    let gained = root.path().join("gained");
+    let run =
+        |gain: &str, out: &Path| diffusion(out, "2", &["--no-codebook", "--layout-gain", gain]);
     assert!(run("2", &gained).status.success());
     let g: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(gained.join("manifest.json")).unwrap())

@@ -65,9 +65,11 @@
 //!
 //! so the layout spans G times as much of model space and stays readable up to G times the
 //! noise (G = 2: a spread of 0.35–0.65, buried at t = 61–144; images in [−1, 1], what the
-//! schedule was made for, have about 0.5). The scales the run trains in (with G applied) are what `diffusion_train.json` and
-//! the manifest record, so sampling needs nothing else; a resume whose scales differ from the
-//! recorded ones (another G, codebook or data set) is refused.
+//! schedule was made for, have about 0.5). The scales the run trains in (with G applied) are
+//! what `diffusion_train.json` and the manifest record, so sampling needs nothing else; a
+//! resume whose scales differ from the recorded ones (another G, codebook or data set) is
+//! refused. Measured with G = 2 (EVALUATION.md, "Layout gain"): suitcase layouts move towards
+//! the data's, category accuracy and 1-NNA stay level, so the shipped weights use G = 1.
 //!
 //! Category conditioning: each sample carries its object's category index, replaced
 //! by the "no category" row with probability `category_dropout`, so one model serves both the
@@ -628,7 +630,8 @@ fn check_resumed_scales(record: &Path, scales: &FeatureScales) -> Result<(), Tra
             return Err(TrainError::Config {
                 field: format!("feature_scales.{name}[{k}]"),
                 limit: format!(
-                    "the resumed run's ({}, recorded in {}; same codebook, data and layout_gain {})",
+                    "the resumed run's {} (recorded in {}, layout_gain {}): resume with the same \
+                     codebook, data and --layout-gain",
                     was.get(k).map_or("absent".into(), |v| v.to_string()),
                     record.display(),
                     doc["layout_gain"].as_f64().unwrap_or(1.0)

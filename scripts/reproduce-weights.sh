@@ -31,7 +31,7 @@
 #   OBJECTS (3000)  SHAPE_STEPS (12000)  STAGE1 (2000)  STAGE2 (7000: the decay in two runs, the
 #   second resumed at STAGE2; 0: one run)  STEPS (14000)  BATCH_OBJECTS (16)  CHECKPOINT_EVERY (500)
 #   IMPORT_FLAGS ("")  SHAPE_FLAGS ("", added to every train shape)  DENOISER_FLAGS ("", added
-#   to every train diffusion; EVALUATION.md "lg2": "--layout-gain 2", level with the shipped)
+#   to every train diffusion; EVALUATION.md "lg2": "--layout-gain 2", the candidate after s14r)
 #   SHAPE_BATCH ("--batch-parts 128 --queries-per-part 128 --surface-points 64": the batch of
 #   the first prior and of every decoder cycle; "" gives train shape's defaults, 16 x 2048 x 512,
 #   the recipe of the weights shipped before 2026-11-28)

@@ -69,7 +69,8 @@
 //! what `diffusion_train.json` and the manifest record, so sampling needs nothing else; a
 //! resume whose scales differ from the recorded ones (another G, codebook or data set) is
 //! refused. Measured with G = 2 (EVALUATION.md, "Layout gain"): suitcase layouts move towards
-//! the data's, category accuracy and 1-NNA stay level, so the shipped weights use G = 1.
+//! the data's, category accuracy 80.3 % over nine seeds against 77.6 %, 1-NNA level; the
+//! shipped weights still use G = 1 until its guided check is done.
 //!
 //! Category conditioning: each sample carries its object's category index, replaced
 //! by the "no category" row with probability `category_dropout`, so one model serves both the

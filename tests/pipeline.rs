@@ -253,8 +253,9 @@ fn synth_import_train_generate() {
         serde_json::from_str(&std::fs::read_to_string(gained.join("manifest.json")).unwrap())
             .unwrap();
     let node = |m: &serde_json::Value, c: usize| m["feature_scales"]["node"][c].as_f64().unwrap();
-    for c in 0..10 {
-        let want = if (1..7).contains(&c) {
+    use physnap::graph::node_ch;
+    for c in 0..node_ch::LATENT + 3 {
+        let want = if (node_ch::BOX..node_ch::LATENT).contains(&c) {
             node(&manifest, c) / 2.0
         } else {
             node(&manifest, c)

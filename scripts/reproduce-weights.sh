@@ -13,17 +13,17 @@
 # at a constant learning rate, then --resume with one cosine decay and a weight EMA to 14,000
 # steps in two runs, the second (7,000 -> 14,000) with the box-overlap penalty --overlap-weight
 # 3, then one more cosine cycle (warm restart) to 18,000 steps with the penalty; the denoiser
-# adds its category to every graph layer, --category-layers; each step's batch in two slices;
-# the last run builds the retrieval codebook) -> eval shape and eval generative
-# --write-manifest.
-# OUT/weights is then a drop-in replacement for weights/ (the weights shipped since 2026-11-29,
-# fortieth session, "s14r"; weights/README.md "How they were made"; the shipped shape prior and
+# adds its category to every graph layer, --category-layers, and trains the part layout at
+# twice NAP's feature scale, --layout-gain 2; each step's batch in two slices; the last run
+# builds the retrieval codebook) -> eval shape and eval generative --write-manifest.
+# OUT/weights is then a drop-in replacement for weights/ (the weights shipped since 2026-11-30,
+# forty-eighth session, "lg2"; weights/README.md "How they were made"; the shipped shape prior and
 # its cycles were trained before --batch-shards existed, with the single pass, SHAPE_SHARDS=1:
 # the same loss up to float rounding, 1.33x / 1.18x slower per step). Until 2026-11-29 (forty-
 # sixth session) the recipe trained the denoiser before the decoder cycles and installed them
 # with train install-shape; with NAP's encoding both orders give the same codes and weights.
-# About 2 h 15 min on 2 idle cores without the evaluations (BENCHMARKS.md "The recipe timed"):
-# the first prior 47 min, the denoiser 66 min, each decoder cycle 10 min, the codebook 1 min.
+# About 2 h 10 min on 2 idle cores without the evaluations (BENCHMARKS.md "The recipe timed"):
+# the first prior 47 min, the denoiser 58 min, each decoder cycle 10 min, the codebook 1 min.
 # Inside the issue's 3-hour budget.
 #
 # Knobs (environment; the defaults are the shipped recipe, smaller values make a smoke run):
@@ -31,7 +31,10 @@
 #   OBJECTS (3000)  SHAPE_STEPS (12000)  STAGE1 (2000)  STAGE2 (7000: the decay in two runs, the
 #   second resumed at STAGE2; 0: one run)  STEPS (14000)  BATCH_OBJECTS (16)  CHECKPOINT_EVERY (500)
 #   IMPORT_FLAGS ("")  SHAPE_FLAGS ("", added to every train shape)  DENOISER_FLAGS ("", added
-#   to every train diffusion; EVALUATION.md "lg2": "--layout-gain 2", the candidate after s14r)
+#   to every train diffusion)
+#   LAYOUT_GAIN (2, as shipped since lg2: every train diffusion's --layout-gain, the part boxes'
+#   and centres' spread in model space; 1: NAP's scaling, the denoisers shipped before
+#   2026-11-30)
 #   SHAPE_BATCH ("--batch-parts 128 --queries-per-part 128 --surface-points 64": the batch of
 #   the first prior and of every decoder cycle; "" gives train shape's defaults, 16 x 2048 x 512,
 #   the recipe of the weights shipped before 2026-11-28)
@@ -60,6 +63,8 @@
 #   encoding, as shipped; EVALUATION.md "fc": 16, 50, 512 with the ws10 cycle above)
 #   EVAL (1: run eval shape and eval generative; 0: skip)
 # Earlier shipped weights (their manifests under docs/eval/):
+#   s14r (2026-11-29 to 2026-11-30, the weights before lg2; docs/eval/layout_gain/previous_manifest.json):
+#     LAYOUT_GAIN=1   (≈ 2 h 15 min)
 #   ov3 (2026-11-28, the weights before s14r; docs/eval/single_schedule/previous_manifest.json):
 #     STAGE2=0 STEPS=7000 DECAY_OVERLAP=0 RESTART_STEPS="14000 21000 24500" RESTART_OVERLAP="0 0 3"
 #     DENOISER_SHARDS=1 SHAPE_SHARDS=1   (≈ 4 h 40 min)
@@ -96,6 +101,7 @@ EVAL=${EVAL:-1}
 ENCODER_VIEWS=${ENCODER_VIEWS:-1}
 FIT_STEPS=${FIT_STEPS:-0}
 FIT_QUERIES=${FIT_QUERIES:-2048}
+LAYOUT_GAIN=${LAYOUT_GAIN:-2}
 
 if ! [[ "$DECODER_CYCLES" =~ ^[0-9]+$ ]]; then
   echo "invalid DECODER_CYCLES: need a whole number of decoder cycles (0 for none), got '$DECODER_CYCLES'" >&2
@@ -134,6 +140,10 @@ for knob in DENOISER_SHARDS RESTART_SHARDS SHAPE_SHARDS; do
     exit 2
   fi
 done
+if ! [[ "$LAYOUT_GAIN" =~ ^[0-9]*\.?[0-9]+$ ]]; then
+  echo "invalid LAYOUT_GAIN: need a positive number (train diffusion checks its range), got '$LAYOUT_GAIN'" >&2
+  exit 2
+fi
 if [ "$SHAPE_BACKWARD" != burn ] && [ "$SHAPE_BACKWARD" != host ]; then
   echo "invalid SHAPE_BACKWARD: need burn or host, got '$SHAPE_BACKWARD'" >&2
   exit 2
@@ -221,7 +231,7 @@ run train encode --weights "$last" --data "$OUT/train" --out "$OUT/codes" \
   --encoder-views "$ENCODER_VIEWS" --fit-steps "$FIT_STEPS" --fit-queries "$FIT_QUERIES"
 common=(--data "$OUT/train" --shape "$OUT/codes" --out "$OUT/weights"
         --batch-objects "$BATCH_OBJECTS" --noise-levels 4 --lr 5e-4
-        --checkpoint-every "$CHECKPOINT_EVERY" --category-layers)
+        --checkpoint-every "$CHECKPOINT_EVERY" --category-layers --layout-gain "$LAYOUT_GAIN")
 # Only the last denoiser run builds the retrieval codebook (≈ 1 min): every other one is
 # continued by another.
 # Stage 1: constant learning rate, no EMA.

@@ -1142,8 +1142,11 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             "{stage}: {m:#}"
         );
     }
-    // Every denoiser run takes two batch slices by default, as the shipped denoiser was trained.
+    // Every denoiser run takes two batch slices by default, as the shipped denoiser was trained,
+    // and the shipped layout gain (LAYOUT_GAIN 2), which the manifest records.
     assert_eq!(diffusion_runs_with(&err, "--batch-shards 2"), 5, "{err}");
+    assert_eq!(diffusion_runs_with(&err, "--layout-gain 2"), 5, "{err}");
+    assert_eq!(m["training"]["diffusion"]["layout_gain"], 2.0, "{m:#}");
     let cycles = m["training"]["shape_cycles"].as_array().unwrap();
     assert_eq!(cycles.len(), 1, "{m:#}");
     assert_eq!(cycles[0]["config"]["seed"], 0, "{m:#}");
@@ -1252,6 +1255,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         (&[("SHAPE_SHARDS", "0")][..], "SHAPE_SHARDS"),
         (&[("FIT_STEPS", "many")][..], "FIT_STEPS"),
         (&[("ENCODER_VIEWS", "-2")][..], "ENCODER_VIEWS"),
+        (&[("LAYOUT_GAIN", "twice")][..], "LAYOUT_GAIN"),
     ] {
         let o = Command::new("bash")
             .arg(concat!(
@@ -1273,7 +1277,8 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     // STAGE2=0, RESTART_STEPS=0: two denoiser runs, the second resuming at STAGE1 and running to STEPS; the
     // first prior with burn's autodiff (SHAPE_BACKWARD=burn), the single-pass steps of the
     // weights shipped before (DENOISER_SHARDS=1, SHAPE_SHARDS=1), one decoder cycle without
-    // the eikonal term and with the wrong-side term (DECODER_WRONG_SIDE=10).
+    // the eikonal term and with the wrong-side term (DECODER_WRONG_SIDE=10), NAP's feature
+    // scales (LAYOUT_GAIN=1).
     let two = root.path().join("two");
     let o = repro(
         &two,
@@ -1290,6 +1295,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             ("ENCODER_VIEWS", "2"),
             ("FIT_STEPS", "2"),
             ("FIT_QUERIES", "32"),
+            ("LAYOUT_GAIN", "1"),
         ],
     );
     let err = String::from_utf8_lossy(&o.stderr);
@@ -1305,6 +1311,8 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     assert_eq!(summary["overlap_weight"], 2.0, "{summary:#}");
     assert_eq!(diffusion_runs_with(&err, "--batch-shards 1"), 2, "{err}");
     let m = read(&two.join("weights/manifest.json"));
+    // LAYOUT_GAIN=1: NAP's scaling, the denoisers shipped before lg2.
+    assert_eq!(m["training"]["diffusion"]["layout_gain"], 1.0, "{m:#}");
     assert_eq!(
         m["training"]["shape_base"]["config"]["decoder_backward"], "burn",
         "{m:#}"

@@ -551,7 +551,7 @@ struct DiffusionArgs {
     /// Layout gain G: the part boxes' and centres' feature scales are divided by G, so the
     /// layout spans G times NAP's max-abs range in model space and survives G times as much
     /// noise (0.25..=8; 1 = NAP). Recorded in the manifest's feature scales.
-    #[arg(long, env = "PHYSNAP_DIFFUSION_LAYOUT_GAIN", default_value_t = 1.0)]
+    #[arg(long, env = "PHYSNAP_DIFFUSION_LAYOUT_GAIN", default_value_t = physnap::train::diffusion::DEFAULT_LAYOUT_GAIN)]
     layout_gain: f64,
     /// Share of training samples that see the "no category" row instead of their category
     /// (0..=1): what classifier-free category guidance and unconditional sampling use.

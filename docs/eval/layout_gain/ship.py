@@ -48,8 +48,7 @@ m['metrics']['generative_seeds'] = {
     'target_category_accuracy': 0.8,
     'target_one_nna': 0.75,
 }
-for f in ('denoiser.safetensors',):
-    shutil.copyfile(f'{src}/{f}', f'weights/{f}')
+shutil.copyfile(f'{src}/denoiser.safetensors', 'weights/denoiser.safetensors')
 shutil.copyfile(D + 'gen_lg2_12345.json', 'weights/eval_generative.json')
 open('weights/manifest.json', 'w').write(
     json.dumps(m, indent=2, ensure_ascii=False).replace('1e-08', '1e-8') + '\n')

@@ -1033,13 +1033,31 @@ pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
         views: a.encoder_views.unwrap_or(recorded.views),
         fit_steps: a.fit_codes.unwrap_or(recorded.fit_steps),
         fit_queries: a.fit_queries.unwrap_or(recorded.fit_queries),
+        fit_prox: a.fit_prox.unwrap_or(recorded.fit_prox),
     };
     enc.validate()?;
     if a.write_manifest && enc != recorded {
         let differs = [
-            ("--encoder-views", enc.views, recorded.views),
-            ("--fit-codes", enc.fit_steps, recorded.fit_steps),
-            ("--fit-queries", enc.fit_queries, recorded.fit_queries),
+            (
+                "--encoder-views",
+                enc.views.to_string(),
+                recorded.views.to_string(),
+            ),
+            (
+                "--fit-codes",
+                enc.fit_steps.to_string(),
+                recorded.fit_steps.to_string(),
+            ),
+            (
+                "--fit-queries",
+                enc.fit_queries.to_string(),
+                recorded.fit_queries.to_string(),
+            ),
+            (
+                "--fit-prox",
+                enc.fit_prox.to_string(),
+                recorded.fit_prox.to_string(),
+            ),
         ]
         .iter()
         .filter(|(_, asked, rec)| asked != rec)
@@ -1127,14 +1145,14 @@ pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
     }
     if enc.fit_steps > 0 {
         println!(
-            "  codes fitted to each part's first {} SDF samples ({} Adam steps from the encoder's, decoder frozen)",
-            enc.fit_queries, enc.fit_steps
+            "  codes fitted to each part's first {} SDF samples ({} Adam steps from the encoder's, decoder frozen, pull toward it {})",
+            enc.fit_queries, enc.fit_steps, enc.fit_prox
         );
     }
     if enc != recorded {
         println!(
-            "  (the codebook's encoding is {} view(s), {} fitting steps: these are not the codes the denoiser learned)",
-            recorded.views, recorded.fit_steps
+            "  (the codebook's encoding is {} view(s), {} fitting steps, pull {}: these are not the codes the denoiser learned)",
+            recorded.views, recorded.fit_steps, recorded.fit_prox
         );
     }
     if surface_points != trained_points {

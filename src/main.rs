@@ -207,6 +207,10 @@ struct EvalShapeArgs {
     /// SDF samples per part a fit uses. Default: the codebook's encoding (2048 for NAP's).
     #[arg(long, env = "PHYSNAP_EVAL_FIT_QUERIES")]
     fit_queries: Option<usize>,
+    /// Weight λ of a fit's pull λ‖z − z₀‖² toward the encoder's code. Default: the codebook's
+    /// encoding (0 for the plain fit).
+    #[arg(long, env = "PHYSNAP_EVAL_FIT_PROX")]
+    fit_prox: Option<f32>,
     /// Encoder input: the first N surface points of each part (cycled when a part has fewer).
     /// Default: the count the prior was trained with, which the codebook and so the denoiser
     /// use; another count measures what the encoder makes of more or fewer points.
@@ -344,6 +348,10 @@ struct EncodeArgs {
     /// SDF samples per part the fit uses (half uniform, half near-surface; even).
     #[arg(long, env = "PHYSNAP_FIT_QUERIES", default_value_t = 2048)]
     fit_queries: usize,
+    /// Weight λ of the fit's pull λ‖z − z₀‖² toward the encoder's code z₀, which keeps fitted
+    /// codes near the encoder's (0: the plain fit).
+    #[arg(long, env = "PHYSNAP_FIT_PROX", default_value_t = 0.0)]
+    fit_prox: f32,
 }
 
 #[derive(Args, Debug)]

@@ -179,6 +179,7 @@ pub fn encode(a: EncodeArgs) -> anyhow::Result<()> {
         views: a.encoder_views,
         fit_steps: a.fit_steps,
         fit_queries: a.fit_queries,
+        fit_prox: a.fit_prox,
     };
     encoding.validate()?;
     let t = std::time::Instant::now();
@@ -196,13 +197,14 @@ pub fn encode(a: EncodeArgs) -> anyhow::Result<()> {
     )?;
     pb.finish_and_clear();
     println!(
-        "encoded {} parts of {} ({} surface points a view, {} view(s), {} fitting steps on {} samples) with {} in {:.0} s; shape directory: {}",
+        "encoded {} parts of {} ({} surface points a view, {} view(s), {} fitting steps on {} samples, pull {}) with {} in {:.0} s; shape directory: {}",
         enc.rows,
         a.data.display(),
         enc.surface_points,
         encoding.views,
         encoding.fit_steps,
         encoding.fit_queries,
+        encoding.fit_prox,
         file.display(),
         t.elapsed().as_secs_f64(),
         a.out.display()

@@ -1015,8 +1015,9 @@ pub fn evaluate_shape_prior(
 /// holds for every part, so the codebook's codes and the evaluated val codes come from the
 /// same protocol. The pull toward z₀ keeps a fitted code near the encoder's codes: the plain
 /// fit moves a code by a median 0.215 (the encoder's codes lie 0.089 apart) and spreads the
-/// codes out of the ≈ 16 directions that hold 98.7 % of the encoder codes' variance
-/// (EVALUATION.md, forty-ninth session). A report without an `"encoding"` entry was made by
+/// codes out of the ≈ 16 directions that hold 98.7 % of the encoder codes' variance; on the
+/// ws10 decoder any pull (λ = 0.01 … 1) gave back 0.02 of the fit's IoU (EVALUATION.md,
+/// forty-ninth session), so no recipe uses it yet. A report without an `"encoding"` entry was made by
 /// NAP's encoding; one without `"fit_prox"`, by the plain fit.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Encoding {

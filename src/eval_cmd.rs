@@ -1037,27 +1037,16 @@ pub fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
     };
     enc.validate()?;
     if a.write_manifest && enc != recorded {
+        let s = |v: &dyn std::fmt::Display| v.to_string();
         let differs = [
-            (
-                "--encoder-views",
-                enc.views.to_string(),
-                recorded.views.to_string(),
-            ),
-            (
-                "--fit-codes",
-                enc.fit_steps.to_string(),
-                recorded.fit_steps.to_string(),
-            ),
+            ("--encoder-views", s(&enc.views), s(&recorded.views)),
+            ("--fit-codes", s(&enc.fit_steps), s(&recorded.fit_steps)),
             (
                 "--fit-queries",
-                enc.fit_queries.to_string(),
-                recorded.fit_queries.to_string(),
+                s(&enc.fit_queries),
+                s(&recorded.fit_queries),
             ),
-            (
-                "--fit-prox",
-                enc.fit_prox.to_string(),
-                recorded.fit_prox.to_string(),
-            ),
+            ("--fit-prox", s(&enc.fit_prox), s(&recorded.fit_prox)),
         ]
         .iter()
         .filter(|(_, asked, rec)| asked != rec)

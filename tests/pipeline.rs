@@ -639,11 +639,27 @@ fn synth_import_train_generate() {
         serde_json::from_str(&std::fs::read_to_string(&fitted).unwrap()).unwrap();
     assert_eq!(f["fit_codes"], 5);
     assert_eq!(f["parts"].as_array().unwrap().len(), parts.len());
-    let o = physnap(&strs(&small(&["--fit-codes", "5", "--write-manifest"])));
+    let o = physnap(&strs(&small(&[
+        "--fit-codes",
+        "5",
+        "--fit-prox",
+        "0.5",
+        "--write-manifest",
+    ])));
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
-        err.contains("--write-manifest") && err.contains("--fit-codes 5"),
+        err.contains("--write-manifest")
+            && err.contains("--fit-codes 5 (the codebook's: 0)")
+            && err.contains("--fit-prox 0.5 (the codebook's: 0)"),
+        "{err}"
+    );
+    // A pull outside its range is refused by field, limit and value.
+    let o = physnap(&strs(&small(&["--fit-codes", "5", "--fit-prox=-1"])));
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("fit_prox") && err.contains("between 0 and 1000") && err.contains("-1"),
         "{err}"
     );
     // Another encoder input is measured and reported as such (its refusals: below).

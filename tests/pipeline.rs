@@ -1343,7 +1343,8 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     // manifest says so (eval shape measures that encoding by default).
     assert_eq!(
         m["training"]["shape"]["encoding"],
-        serde_json::json!({"views": 2, "fit_steps": 2, "fit_queries": 32, "fit_lr": 0.01}),
+        serde_json::json!({"views": 2, "fit_steps": 2, "fit_queries": 32, "fit_lr": 0.01,
+            "fit_prox": 0.0}),
         "{m:#}"
     );
     assert_eq!(

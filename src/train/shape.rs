@@ -1017,8 +1017,8 @@ pub fn evaluate_shape_prior(
 /// fit moves a code by a median 0.215 (the encoder's codes lie 0.089 apart) and spreads the
 /// codes out of the ≈ 16 directions that hold 98.7 % of the encoder codes' variance; on the
 /// ws10 decoder any pull (λ = 0.01 … 1) gave back 0.02 of the fit's IoU (EVALUATION.md,
-/// forty-ninth session), so no recipe uses it yet. A report without an `"encoding"` entry was made by
-/// NAP's encoding; one without `"fit_prox"`, by the plain fit.
+/// forty-ninth session), so no recipe uses it yet. A report without an `"encoding"` entry
+/// was made by NAP's encoding; one without `"fit_prox"`, by the plain fit.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Encoding {
     /// Encoder calls per part, each on the next `surface_points` surface points; the code is
@@ -1168,9 +1168,8 @@ fn encode_codes(
 /// The decoder's best codes for parts with samples `fit`: `steps` Adam steps (lr [`FIT_LR`])
 /// on each part's code, from `codes` [P × F], minimising the mean |f(q; z) − f_gt| over the
 /// part's samples plus `prox` ‖z − z₀‖² (z₀ the code it started from), with the decoder
-/// frozen (DeepSDF's auto-decoder inference). Each part's
-/// code moves by its own samples only, so the result does not depend on how parts are
-/// batched.
+/// frozen (DeepSDF's auto-decoder inference). Each part's code moves by its own samples
+/// only, so the result does not depend on how parts are batched.
 fn fit_codes(
     decoder: &ShapeDecoder,
     host: &HostDecoder,

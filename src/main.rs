@@ -561,6 +561,11 @@ struct DiffusionArgs {
     /// noise (0.25..=8; 1 = NAP). Recorded in the manifest's feature scales.
     #[arg(long, env = "PHYSNAP_DIFFUSION_LAYOUT_GAIN", default_value_t = physnap::train::diffusion::DEFAULT_LAYOUT_GAIN)]
     layout_gain: f64,
+    /// Code gain G_z: the 128 shape-code channels' feature scales are divided by G_z, so the
+    /// generated codes are denoised at G_z times NAP's max-abs range in model space
+    /// (0.25..=8; 1 = NAP). Recorded in the manifest's feature scales.
+    #[arg(long, env = "PHYSNAP_DIFFUSION_CODE_GAIN", default_value_t = physnap::train::diffusion::DEFAULT_CODE_GAIN)]
+    code_gain: f64,
     /// Share of training samples that see the "no category" row instead of their category
     /// (0..=1): what classifier-free category guidance and unconditional sampling use.
     #[arg(long, env = "PHYSNAP_DIFFUSION_CATEGORY_DROPOUT", default_value_t = physnap::train::diffusion::DEFAULT_CATEGORY_DROPOUT)]

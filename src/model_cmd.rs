@@ -399,6 +399,7 @@ pub fn diffusion(a: DiffusionArgs) -> anyhow::Result<()> {
         overlap_weight: a.overlap_weight,
         overlap_max_t: a.overlap_max_t,
         layout_gain: a.layout_gain,
+        code_gain: a.code_gain,
         category_dropout: a.category_dropout,
         batch_shards: a.batch_shards,
         compute,

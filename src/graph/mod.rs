@@ -306,6 +306,17 @@ impl FeatureScales {
         s
     }
 
+    /// These scales with the shape-code channels divided by `gain`: the codes then span `gain`
+    /// times as much of model space (see `DiffusionTrainConfig::code_gain`). 1 leaves them
+    /// unchanged.
+    pub fn with_code_gain(&self, gain: f32) -> Self {
+        let mut s = self.clone();
+        for v in &mut s.node[node_ch::LATENT..node_ch::LATENT + LATENT_DIM] {
+            *v /= gain;
+        }
+        s
+    }
+
     /// Check lengths and positivity.
     pub fn validate(&self) -> CoreResult<()> {
         if self.node.len() != NODE_DIM || self.edge.len() != EDGE_DIM {

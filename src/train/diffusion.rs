@@ -73,6 +73,13 @@
 //! fits level or closer; the shipped weights use G = 2 since 2026-11-30 (the recipe's
 //! `LAYOUT_GAIN`), while the flag's default stays NAP's 1.
 //!
+//! Code gain (`code_gain` = G_z; 1 by default): the same division for the 128 shape-code
+//! channels, `model value = raw value / (scale_c / G_z)`. NAP's grouped loss gives the codes
+//! one group, and generated codes land about ten times further from the nearest training code
+//! than held-out parts encode (EVALUATION.md, forty-fifth session); G_z > 1 keeps the codes
+//! readable to G_z times the noise, so the reverse process has more steps to place them.
+//! Recorded, applied and checked on resume exactly as the layout gain.
+//!
 //! Category conditioning: each sample carries its object's category index, replaced
 //! by the "no category" row with probability `category_dropout`, so one model serves both the
 //! category-aware and the unconditional mode.
@@ -168,6 +175,10 @@ pub struct DiffusionTrainConfig {
     /// space the part layout spans G times NAP's max-abs range (module documentation). 1 =
     /// NAP's scaling.
     pub layout_gain: f64,
+    /// Code gain G_z: the 128 shape-code channels' feature scales are divided by G_z, so the
+    /// codes span G_z times NAP's max-abs range in model space (module documentation). 1 =
+    /// NAP's scaling.
+    pub code_gain: f64,
     /// Shards each step's batch is split into: their forward and backward passes run in
     /// parallel on the rayon pool and their gradients are summed (see the module documentation).
     pub batch_shards: usize,
@@ -228,6 +239,7 @@ impl Default for DiffusionTrainConfig {
             overlap_weight: 0.0,
             overlap_max_t: DEFAULT_OVERLAP_MAX_T,
             layout_gain: DEFAULT_LAYOUT_GAIN,
+            code_gain: DEFAULT_CODE_GAIN,
             batch_shards: 2,
             compute: Compute::Cpu,
         }
@@ -243,6 +255,9 @@ pub const DEFAULT_LAYOUT_GAIN: f64 = 1.0;
 pub const MIN_LAYOUT_GAIN: f64 = 0.25;
 /// Largest accepted `layout_gain`.
 pub const MAX_LAYOUT_GAIN: f64 = 8.0;
+
+/// Default `code_gain`: NAP's max-abs scaling, unchanged.
+pub const DEFAULT_CODE_GAIN: f64 = 1.0;
 
 /// Default `overlap_max_t`.
 pub const DEFAULT_OVERLAP_MAX_T: usize = 300;
@@ -634,11 +649,12 @@ fn check_resumed_scales(record: &Path, scales: &FeatureScales) -> Result<(), Tra
             return Err(TrainError::Config {
                 field: format!("feature_scales.{name}[{k}]"),
                 limit: format!(
-                    "the resumed run's {} (recorded in {}, layout_gain {}): resume with the same \
-                     codebook, data and --layout-gain",
+                    "the resumed run's {} (recorded in {}, layout_gain {}, code_gain {}): resume \
+                     with the same codebook, data, --layout-gain and --code-gain",
                     was.get(k).map_or("absent".into(), |v| v.to_string()),
                     record.display(),
-                    doc["layout_gain"].as_f64().unwrap_or(DEFAULT_LAYOUT_GAIN)
+                    doc["layout_gain"].as_f64().unwrap_or(DEFAULT_LAYOUT_GAIN),
+                    doc["code_gain"].as_f64().unwrap_or(DEFAULT_CODE_GAIN)
                 ),
                 value: now[k].to_string(),
             });
@@ -726,6 +742,12 @@ pub fn train_diffusion(
             cfg.layout_gain.to_string(),
         ),
         (
+            "code_gain",
+            (MIN_LAYOUT_GAIN..=MAX_LAYOUT_GAIN).contains(&cfg.code_gain),
+            "within [0.25, 8] (1 = NAP's scaling)",
+            cfg.code_gain.to_string(),
+        ),
+        (
             "batch_shards",
             (1..=cfg.batch_objects * cfg.noise_levels).contains(&cfg.batch_shards),
             "within 1..=batch_objects × noise_levels",
@@ -746,7 +768,10 @@ pub fn train_diffusion(
             });
         }
     }
-    let scales = data.scales.with_layout_gain(cfg.layout_gain as f32);
+    let scales = data
+        .scales
+        .with_layout_gain(cfg.layout_gain as f32)
+        .with_code_gain(cfg.code_gain as f32);
     std::fs::create_dir_all(out).map_err(|e| data_err(out, e.to_string()))?;
     let device = cfg.compute.autodiff();
     let schedule = Schedule::default();
@@ -936,6 +961,7 @@ pub fn train_diffusion(
         "overlap_weight": cfg.overlap_weight, "overlap_max_t": cfg.overlap_max_t,
         "batch_shards": cfg.batch_shards,
         "layout_gain": cfg.layout_gain,
+        "code_gain": cfg.code_gain,
         "feature_scales": { "node": &scales.node, "edge": &scales.edge },
         "categories": CATEGORIES.to_vec(), "train_objects": data.graphs.len(), "sha256": sha,
     });
@@ -1021,6 +1047,7 @@ pub(crate) mod tests {
             overlap_weight: 0.0,
             overlap_max_t: DEFAULT_OVERLAP_MAX_T,
             layout_gain: 1.0,
+            code_gain: 1.0,
             batch_shards: 2,
             compute: crate::model::Compute::Cpu,
         }
@@ -1152,6 +1179,41 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn code_gain_scales_the_code_channels_only_and_a_resume_must_keep_it() {
+        let data = tiny_data();
+        let dir = tempfile::tempdir().unwrap();
+        let gained = DiffusionTrainConfig {
+            code_gain: 4.0,
+            ..tiny_config(4)
+        };
+        let r = train_diffusion(&data, &gained, dir.path(), false, &mut |_| {}).unwrap();
+        let codes = node_ch::LATENT..node_ch::LATENT + crate::object::LATENT_DIM;
+        for c in 0..NODE_DIM {
+            let want = if codes.contains(&c) {
+                data.scales.node[c] / 4.0
+            } else {
+                data.scales.node[c]
+            };
+            assert_eq!(r.scales.node[c], want, "node channel {c}");
+        }
+        assert_eq!(r.scales.edge, data.scales.edge);
+        let summary: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(dir.path().join("diffusion_train.json")).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(summary["code_gain"], 4.0);
+        let e = train_diffusion(&data, &tiny_config(8), dir.path(), true, &mut |_| {})
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            e.contains(&format!("feature_scales.node[{}]", node_ch::LATENT))
+                && e.contains("code_gain 4"),
+            "{e}"
+        );
+    }
+
+    #[test]
     fn bad_config_values_are_named() {
         let err = |cfg: DiffusionTrainConfig| {
             let dir = tempfile::tempdir().unwrap();
@@ -1162,13 +1224,20 @@ pub(crate) mod tests {
         };
         // Each bad value, and what its error must name: the field, the value, the limit.
         let base = || tiny_config(10);
-        let cases: [(DiffusionTrainConfig, &[&str]); 9] = [
+        let cases: [(DiffusionTrainConfig, &[&str]); 10] = [
             (
                 DiffusionTrainConfig {
                     layout_gain: 0.2,
                     ..base()
                 },
                 &["layout_gain", "0.2", "[0.25, 8]"],
+            ),
+            (
+                DiffusionTrainConfig {
+                    code_gain: 9.0,
+                    ..base()
+                },
+                &["code_gain", "9", "[0.25, 8]"],
             ),
             (
                 DiffusionTrainConfig {

@@ -35,6 +35,8 @@
 #   LAYOUT_GAIN (2, as shipped since lg2: every train diffusion's --layout-gain, the part boxes'
 #   and centres' spread in model space; 1: NAP's scaling, the denoisers shipped before
 #   2026-11-30)
+#   CODE_GAIN (1, NAP's scaling, as shipped: every train diffusion's --code-gain, the shape codes'
+#   spread in model space; EVALUATION.md "fcg2": 2 with the fc encoding above)
 #   SHAPE_BATCH ("--batch-parts 128 --queries-per-part 128 --surface-points 64": the batch of
 #   the first prior and of every decoder cycle; "" gives train shape's defaults, 16 x 2048 x 512,
 #   the recipe of the weights shipped before 2026-11-28)
@@ -102,6 +104,7 @@ ENCODER_VIEWS=${ENCODER_VIEWS:-1}
 FIT_STEPS=${FIT_STEPS:-0}
 FIT_QUERIES=${FIT_QUERIES:-2048}
 LAYOUT_GAIN=${LAYOUT_GAIN:-2}
+CODE_GAIN=${CODE_GAIN:-1}
 
 if ! [[ "$DECODER_CYCLES" =~ ^[0-9]+$ ]]; then
   echo "invalid DECODER_CYCLES: need a whole number of decoder cycles (0 for none), got '$DECODER_CYCLES'" >&2
@@ -140,10 +143,12 @@ for knob in DENOISER_SHARDS RESTART_SHARDS SHAPE_SHARDS; do
     exit 2
   fi
 done
-if ! [[ "$LAYOUT_GAIN" =~ ^[0-9]*\.?[0-9]+$ ]]; then
-  echo "invalid LAYOUT_GAIN: need a positive number (train diffusion checks its range), got '$LAYOUT_GAIN'" >&2
-  exit 2
-fi
+for knob in LAYOUT_GAIN CODE_GAIN; do
+  if ! [[ "${!knob}" =~ ^[0-9]*\.?[0-9]+$ ]]; then
+    echo "invalid $knob: need a positive number (train diffusion checks its range), got '${!knob}'" >&2
+    exit 2
+  fi
+done
 if [ "$SHAPE_BACKWARD" != burn ] && [ "$SHAPE_BACKWARD" != host ]; then
   echo "invalid SHAPE_BACKWARD: need burn or host, got '$SHAPE_BACKWARD'" >&2
   exit 2
@@ -231,7 +236,8 @@ run train encode --weights "$last" --data "$OUT/train" --out "$OUT/codes" \
   --encoder-views "$ENCODER_VIEWS" --fit-steps "$FIT_STEPS" --fit-queries "$FIT_QUERIES"
 common=(--data "$OUT/train" --shape "$OUT/codes" --out "$OUT/weights"
         --batch-objects "$BATCH_OBJECTS" --noise-levels 4 --lr 5e-4
-        --checkpoint-every "$CHECKPOINT_EVERY" --category-layers --layout-gain "$LAYOUT_GAIN")
+        --checkpoint-every "$CHECKPOINT_EVERY" --category-layers --layout-gain "$LAYOUT_GAIN"
+        --code-gain "$CODE_GAIN")
 # Only the last denoiser run builds the retrieval codebook (≈ 1 min): every other one is
 # continued by another.
 # Stage 1: constant learning rate, no EMA.

@@ -1163,6 +1163,9 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     assert_eq!(diffusion_runs_with(&err, "--batch-shards 2"), 5, "{err}");
     assert_eq!(diffusion_runs_with(&err, "--layout-gain 2"), 5, "{err}");
     assert_eq!(m["training"]["diffusion"]["layout_gain"], 2.0, "{m:#}");
+    // NAP's scaling of the shape codes (CODE_GAIN 1), as shipped.
+    assert_eq!(diffusion_runs_with(&err, "--code-gain 1"), 5, "{err}");
+    assert_eq!(m["training"]["diffusion"]["code_gain"], 1.0, "{m:#}");
     let cycles = m["training"]["shape_cycles"].as_array().unwrap();
     assert_eq!(cycles.len(), 1, "{m:#}");
     assert_eq!(cycles[0]["config"]["seed"], 0, "{m:#}");
@@ -1272,6 +1275,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         (&[("FIT_STEPS", "many")][..], "FIT_STEPS"),
         (&[("ENCODER_VIEWS", "-2")][..], "ENCODER_VIEWS"),
         (&[("LAYOUT_GAIN", "twice")][..], "LAYOUT_GAIN"),
+        (&[("CODE_GAIN", "double")][..], "CODE_GAIN"),
     ] {
         let o = Command::new("bash")
             .arg(concat!(
@@ -1294,7 +1298,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     // first prior with burn's autodiff (SHAPE_BACKWARD=burn), the single-pass steps of the
     // weights shipped before (DENOISER_SHARDS=1, SHAPE_SHARDS=1), one decoder cycle without
     // the eikonal term and with the wrong-side term (DECODER_WRONG_SIDE=10), NAP's feature
-    // scales (LAYOUT_GAIN=1).
+    // scales for the layout (LAYOUT_GAIN=1) and twice them for the codes (CODE_GAIN=2).
     let two = root.path().join("two");
     let o = repro(
         &two,
@@ -1312,6 +1316,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             ("FIT_STEPS", "2"),
             ("FIT_QUERIES", "32"),
             ("LAYOUT_GAIN", "1"),
+            ("CODE_GAIN", "2"),
         ],
     );
     let err = String::from_utf8_lossy(&o.stderr);
@@ -1329,6 +1334,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     let m = read(&two.join("weights/manifest.json"));
     // LAYOUT_GAIN=1: NAP's scaling, the denoisers shipped before lg2.
     assert_eq!(m["training"]["diffusion"]["layout_gain"], 1.0, "{m:#}");
+    assert_eq!(m["training"]["diffusion"]["code_gain"], 2.0, "{m:#}");
     assert_eq!(
         m["training"]["shape_base"]["config"]["decoder_backward"], "burn",
         "{m:#}"

@@ -1125,71 +1125,22 @@ pub(crate) mod tests {
     }
 
     #[test]
-    fn layout_gain_scales_the_layout_channels_and_a_resume_must_keep_it() {
+    fn layout_and_code_gains_scale_their_own_channels_and_a_resume_must_keep_both() {
         let data = tiny_data();
         let dir = tempfile::tempdir().unwrap();
-        let gained = DiffusionTrainConfig {
-            layout_gain: 2.0,
-            ..tiny_config(4)
+        let gains = |layout_gain, code_gain, steps| DiffusionTrainConfig {
+            layout_gain,
+            code_gain,
+            ..tiny_config(steps)
         };
-        let r = train_diffusion(&data, &gained, dir.path(), false, &mut |_| {}).unwrap();
-        // Box and centre scales halved, existence, codes and edges as the data's.
+        let r =
+            train_diffusion(&data, &gains(2.0, 4.0, 4), dir.path(), false, &mut |_| {}).unwrap();
+        // Box and centre scales halved, code scales quartered, existence and edges as the data's.
+        let codes = node_ch::LATENT..node_ch::LATENT + crate::object::LATENT_DIM;
         for c in 0..NODE_DIM {
             let want = if (node_ch::BOX..node_ch::LATENT).contains(&c) {
                 data.scales.node[c] / 2.0
-            } else {
-                data.scales.node[c]
-            };
-            assert_eq!(r.scales.node[c], want, "node channel {c}");
-        }
-        assert_eq!(r.scales.edge, data.scales.edge);
-        // The run's record carries them (the manifest takes `r.scales`) and the gain.
-        let summary: serde_json::Value = serde_json::from_str(
-            &std::fs::read_to_string(dir.path().join("diffusion_train.json")).unwrap(),
-        )
-        .unwrap();
-        assert_eq!(summary["layout_gain"], 2.0);
-        assert_eq!(
-            summary["feature_scales"]["node"][node_ch::CENTER]
-                .as_f64()
-                .unwrap() as f32,
-            r.scales.node[node_ch::CENTER]
-        );
-        // Resuming with NAP's scaling would train the same weights in another model space.
-        let e = train_diffusion(&data, &tiny_config(8), dir.path(), true, &mut |_| {})
-            .err()
-            .unwrap()
-            .to_string();
-        assert!(
-            e.contains(&format!("feature_scales.node[{}]", node_ch::BOX))
-                && e.contains("layout_gain 2"),
-            "{e}"
-        );
-        // With the same gain it continues.
-        let gained8 = DiffusionTrainConfig {
-            layout_gain: 2.0,
-            ..tiny_config(8)
-        };
-        let mut steps = Vec::new();
-        train_diffusion(&data, &gained8, dir.path(), true, &mut |p| {
-            steps.push(p.step)
-        })
-        .unwrap();
-        assert_eq!((steps.first(), steps.last()), (Some(&5), Some(&8)));
-    }
-
-    #[test]
-    fn code_gain_scales_the_code_channels_only_and_a_resume_must_keep_it() {
-        let data = tiny_data();
-        let dir = tempfile::tempdir().unwrap();
-        let gained = DiffusionTrainConfig {
-            code_gain: 4.0,
-            ..tiny_config(4)
-        };
-        let r = train_diffusion(&data, &gained, dir.path(), false, &mut |_| {}).unwrap();
-        let codes = node_ch::LATENT..node_ch::LATENT + crate::object::LATENT_DIM;
-        for c in 0..NODE_DIM {
-            let want = if codes.contains(&c) {
+            } else if codes.contains(&c) {
                 data.scales.node[c] / 4.0
             } else {
                 data.scales.node[c]
@@ -1197,20 +1148,47 @@ pub(crate) mod tests {
             assert_eq!(r.scales.node[c], want, "node channel {c}");
         }
         assert_eq!(r.scales.edge, data.scales.edge);
+        // The run's record carries them (the manifest takes `r.scales`) and both gains.
         let summary: serde_json::Value = serde_json::from_str(
             &std::fs::read_to_string(dir.path().join("diffusion_train.json")).unwrap(),
         )
         .unwrap();
-        assert_eq!(summary["code_gain"], 4.0);
-        let e = train_diffusion(&data, &tiny_config(8), dir.path(), true, &mut |_| {})
-            .err()
-            .unwrap()
-            .to_string();
-        assert!(
-            e.contains(&format!("feature_scales.node[{}]", node_ch::LATENT))
-                && e.contains("code_gain 4"),
-            "{e}"
+        assert_eq!(
+            (&summary["layout_gain"], &summary["code_gain"]),
+            (&2.0.into(), &4.0.into())
         );
+        for ch in [node_ch::CENTER, node_ch::LATENT] {
+            assert_eq!(
+                summary["feature_scales"]["node"][ch].as_f64().unwrap() as f32,
+                r.scales.node[ch]
+            );
+        }
+        // Resuming with another scaling would train the same weights in another model space:
+        // the error names the first channel that differs and the recorded gains.
+        let resume_err = |cfg: DiffusionTrainConfig| {
+            train_diffusion(&data, &cfg, dir.path(), true, &mut |_| {})
+                .err()
+                .unwrap()
+                .to_string()
+        };
+        for (cfg, channel) in [
+            (tiny_config(8), node_ch::BOX),
+            (gains(2.0, 1.0, 8), node_ch::LATENT),
+        ] {
+            let e = resume_err(cfg);
+            assert!(
+                e.contains(&format!("feature_scales.node[{channel}]"))
+                    && e.contains("layout_gain 2, code_gain 4"),
+                "{e}"
+            );
+        }
+        // With the same gains it continues.
+        let mut steps = Vec::new();
+        train_diffusion(&data, &gains(2.0, 4.0, 8), dir.path(), true, &mut |p| {
+            steps.push(p.step)
+        })
+        .unwrap();
+        assert_eq!((steps.first(), steps.last()), (Some(&5), Some(&8)));
     }
 
     #[test]

@@ -299,19 +299,20 @@ impl FeatureScales {
     /// `gain` times as much of model space, so the forward process takes `gain` times as much
     /// noise to bury it (see `DiffusionTrainConfig::layout_gain`). 1 leaves them unchanged.
     pub fn with_layout_gain(&self, gain: f32) -> Self {
-        let mut s = self.clone();
-        for v in &mut s.node[node_ch::BOX..node_ch::LATENT] {
-            *v /= gain;
-        }
-        s
+        self.with_node_gain(node_ch::BOX..node_ch::LATENT, gain)
     }
 
     /// These scales with the shape-code channels divided by `gain`: the codes then span `gain`
     /// times as much of model space (see `DiffusionTrainConfig::code_gain`). 1 leaves them
     /// unchanged.
     pub fn with_code_gain(&self, gain: f32) -> Self {
+        self.with_node_gain(node_ch::LATENT..node_ch::LATENT + LATENT_DIM, gain)
+    }
+
+    /// These scales with the node channels `channels` divided by `gain`.
+    fn with_node_gain(&self, channels: std::ops::Range<usize>, gain: f32) -> Self {
         let mut s = self.clone();
-        for v in &mut s.node[node_ch::LATENT..node_ch::LATENT + LATENT_DIM] {
+        for v in &mut s.node[channels] {
             *v /= gain;
         }
         s

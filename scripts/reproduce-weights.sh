@@ -4,27 +4,31 @@
 #   bash scripts/reproduce-weights.sh [OUT]        # default OUT: repro
 #
 # data synth -> data import -> train shape (12,000 steps, 128 parts x 128 queries x 64 surface
-# points a batch, host backward pass, the parts of each step in two slices) -> two more cosine
-# cycles of the shape prior's decoder with its encoder frozen and an eikonal term (train shape
-# --init-from the previous run --freeze-encoder at lr 5e-4: cycle 1 seed 0 eikonal 0.01, cycle 2
-# seed 1 eikonal 0.03) -> train encode: every part's code from the last cycle (ENCODER_VIEWS,
-# FIT_STEPS, FIT_QUERIES; with NAP's encoding, as shipped, these are the first prior's codes,
-# since the cycles freeze the encoder) -> train diffusion on those codes (four runs: 2,000 steps
-# at a constant learning rate, then --resume with one cosine decay and a weight EMA to 14,000
-# steps in two runs, the second (7,000 -> 14,000) with the box-overlap penalty --overlap-weight
-# 3, then one more cosine cycle (warm restart) to 18,000 steps with the penalty; the denoiser
-# adds its category to every graph layer, --category-layers, and trains the part layout at
-# twice NAP's feature scale, --layout-gain 2; each step's batch in two slices; the last run
+# points a batch, host backward pass, the parts of each step in two slices) -> three more cosine
+# cycles of the shape prior's decoder with its encoder frozen (train shape --init-from the
+# previous run --freeze-encoder at lr 5e-4: cycle 1 seed 0 eikonal 0.01, cycle 2 seed 1 eikonal
+# 0.03, cycle 3 seed 2 eikonal 0.03 with the wrong-side term --wrong-side 10, "ws10") -> train
+# encode: every part's code from the last cycle, the mean of 16 encoder views fitted 50 Adam
+# steps on 512 SDF samples with the decoder frozen (ENCODER_VIEWS, FIT_STEPS, FIT_QUERIES) ->
+# train diffusion on those codes (four runs: 2,000 steps at a constant learning rate, then
+# --resume with one cosine decay and a weight EMA to 14,000 steps in two runs, the second
+# (7,000 -> 14,000) with the box-overlap penalty --overlap-weight 3, then one more cosine cycle
+# (warm restart) to 18,000 steps with the penalty; the denoiser adds its category to every graph
+# layer, --category-layers, and trains the part layout and the shape codes at twice NAP's
+# feature scale, --layout-gain 2 --code-gain 2; each step's batch in two slices; the last run
 # builds the retrieval codebook) -> eval shape and eval generative --write-manifest.
 # OUT/weights is then a drop-in replacement for weights/ (the weights shipped since 2026-11-30,
-# forty-eighth session, "lg2"; weights/README.md "How they were made"; the shipped shape prior and
-# its cycles were trained before --batch-shards existed, with the single pass, SHAPE_SHARDS=1:
-# the same loss up to float rounding, 1.33x / 1.18x slower per step). Until 2026-11-29 (forty-
-# sixth session) the recipe trained the denoiser before the decoder cycles and installed them
-# with train install-shape; with NAP's encoding both orders give the same codes and weights.
-# About 2 h 10 min on 2 idle cores without the evaluations (BENCHMARKS.md "The recipe timed"):
-# the first prior 47 min, the denoiser 58 min, each decoder cycle 10 min, the codebook 1 min.
-# Inside the issue's 3-hour budget.
+# fifty-first session, "fcg2"; weights/README.md "How they were made"). The shipped files were
+# trained stage by stage with these commands, not by one run of this script: the first prior
+# and its first two cycles before --batch-shards existed, with the single pass (SHAPE_SHARDS=1:
+# the same loss up to float rounding, 1.33x / 1.18x slower per step), the codes with ws10 as it
+# was rebuilt in session 45. Until 2026-11-29 (forty-sixth session) the recipe trained the
+# denoiser before the decoder cycles and installed them with train install-shape; with NAP's
+# encoding both orders give the same codes and weights.
+# About 2 h 41 min on 2 idle cores without the evaluations, a sum of stage timings
+# (BENCHMARKS.md "Candidate fcg2"): the first prior 47 min plus the first two cycles and the
+# import (4,087 s together), the third cycle 11 min, the codebook of fitted codes 21 min, the
+# denoiser 61 min. Inside the issue's 3-hour budget.
 #
 # Knobs (environment; the defaults are the shipped recipe, smaller values make a smoke run):
 #   PHYSNAP_BIN   physnap binary (default: cargo build --release, then target/release/physnap)
@@ -35,8 +39,9 @@
 #   LAYOUT_GAIN (2, as shipped since lg2: every train diffusion's --layout-gain, the part boxes'
 #   and centres' spread in model space; 1: NAP's scaling, the denoisers shipped before
 #   2026-11-30)
-#   CODE_GAIN (1, NAP's scaling, as shipped: every train diffusion's --code-gain, the shape codes'
-#   spread in model space; EVALUATION.md "fcg2": 2 with the fc encoding above)
+#   CODE_GAIN (2, as shipped since fcg2: every train diffusion's --code-gain, the shape codes'
+#   spread in model space; 1: NAP's scaling, the denoisers shipped before 2026-11-30, fifty-first
+#   session)
 #   SHAPE_BATCH ("--batch-parts 128 --queries-per-part 128 --surface-points 64": the batch of
 #   the first prior and of every decoder cycle; "" gives train shape's defaults, 16 x 2048 x 512,
 #   the recipe of the weights shipped before 2026-11-28)
@@ -52,26 +57,30 @@
 #   RESTART_OVERLAP ("3", as shipped: one train diffusion --overlap-weight per restart cycle;
 #   ignored without restarts)
 #   RESTART_SHARDS (2: the restart cycles' batch slices)
-#   DECODER_STEPS (3000; 0: no decoder cycle)  DECODER_CYCLES (2; 0: none)
-#   DECODER_EIKONAL ("0.01 0.03": the eikonal weight of each cycle, one value per cycle; 0 is
-#   the plain cycle, which raises the shape IoU more but aligns guided fits worse, EVALUATION.md)
-#   DECODER_WRONG_SIDE ("0 0": the --wrong-side weight of each cycle, one value per cycle; a
-#   third cycle with 10 raises the shape IoU 0.775 -> 0.812 but costs category accuracy,
-#   EVALUATION.md "ws10c": DECODER_CYCLES=3 DECODER_EIKONAL="0.01 0.03 0.03"
-#   DECODER_WRONG_SIDE="0 0 10")
+#   DECODER_STEPS (3000; 0: no decoder cycle)  DECODER_CYCLES (3, as shipped; 0: none)
+#   DECODER_EIKONAL ("0.01 0.03 0.03": the eikonal weight of each cycle, one value per cycle; 0
+#   is the plain cycle, which raises the shape IoU more but aligns guided fits worse,
+#   EVALUATION.md)
+#   DECODER_WRONG_SIDE ("0 0 10": the --wrong-side weight of each cycle, one value per cycle;
+#   the third cycle's 10 raises the shape IoU 0.775 -> 0.812 by NAP's encoding, EVALUATION.md
+#   "ws10")
 #   DECODER_FLAGS ("": more flags for every decoder cycle)
-#   ENCODER_VIEWS (1)  FIT_STEPS (0)  FIT_QUERIES (2048): train encode's --encoder-views,
-#   --fit-steps and --fit-queries, how the codes the denoiser learns are made (1, 0: NAP's
-#   encoding, as shipped; EVALUATION.md "fc": 16, 50, 512 with the ws10 cycle above)
+#   ENCODER_VIEWS (16)  FIT_STEPS (50)  FIT_QUERIES (512): train encode's --encoder-views,
+#   --fit-steps and --fit-queries, how the codes the denoiser learns are made (as shipped since
+#   fcg2, shape IoU 0.860 on the 64 val parts; 1, 0, 2048: NAP's encoding, the weights before)
 #   EVAL (1: run eval shape and eval generative; 0: skip)
 # Earlier shipped weights (their manifests under docs/eval/):
+#   lg2 (2026-11-30, forty-eighth to fiftieth sessions, the weights before fcg2;
+#     docs/eval/code_gain/previous_manifest.json): DECODER_CYCLES=2 DECODER_EIKONAL="0.01 0.03"
+#     DECODER_WRONG_SIDE="0 0" ENCODER_VIEWS=1 FIT_STEPS=0 FIT_QUERIES=2048 CODE_GAIN=1
+#     (≈ 2 h 10 min)
 #   s14r (2026-11-29 to 2026-11-30, the weights before lg2; docs/eval/layout_gain/previous_manifest.json):
-#     LAYOUT_GAIN=1   (≈ 2 h 15 min)
+#     the lg2 knobs and LAYOUT_GAIN=1   (≈ 2 h 15 min)
 #   ov3 (2026-11-28, the weights before s14r; docs/eval/single_schedule/previous_manifest.json):
-#     STAGE2=0 STEPS=7000 DECAY_OVERLAP=0 RESTART_STEPS="14000 21000 24500" RESTART_OVERLAP="0 0 3"
+#     the s14r knobs and STAGE2=0 STEPS=7000 DECAY_OVERLAP=0 RESTART_STEPS="14000 21000 24500" RESTART_OVERLAP="0 0 3"
 #     DENOISER_SHARDS=1 SHAPE_SHARDS=1   (≈ 4 h 40 min)
 #   v5r2 (2026-11-28): the same with RESTART_STEPS=0   (≈ 3 h 25 min)
-#   2026-11-27: SHAPE_STEPS=3000 SHAPE_BATCH="" SHAPE_BACKWARD=burn DECODER_EIKONAL="0.01 0.01"
+#   2026-11-27: the s14r knobs and SHAPE_STEPS=3000 SHAPE_BATCH="" SHAPE_BACKWARD=burn DECODER_EIKONAL="0.01 0.01"
 #     STAGE2=0 STEPS=7000 DECAY_OVERLAP=0 RESTART_STEPS=0 DENOISER_SHARDS=1 SHAPE_SHARDS=1
 set -euo pipefail
 
@@ -88,9 +97,9 @@ SHAPE_FLAGS=${SHAPE_FLAGS:-}
 DENOISER_FLAGS=${DENOISER_FLAGS:-}
 DECODER_STEPS=${DECODER_STEPS:-3000}
 DECODER_FLAGS=${DECODER_FLAGS:-}
-DECODER_CYCLES=${DECODER_CYCLES:-2}
-DECODER_EIKONAL=${DECODER_EIKONAL-"0.01 0.03"}
-DECODER_WRONG_SIDE=${DECODER_WRONG_SIDE-"0 0"}
+DECODER_CYCLES=${DECODER_CYCLES:-3}
+DECODER_EIKONAL=${DECODER_EIKONAL-"0.01 0.03 0.03"}
+DECODER_WRONG_SIDE=${DECODER_WRONG_SIDE-"0 0 10"}
 SHAPE_BATCH=${SHAPE_BATCH-"--batch-parts 128 --queries-per-part 128 --surface-points 64"}
 SHAPE_BACKWARD=${SHAPE_BACKWARD:-host}
 DENOISER_SHARDS=${DENOISER_SHARDS:-2}
@@ -100,11 +109,11 @@ RESTART_SHARDS=${RESTART_SHARDS:-2}
 DECAY_OVERLAP=${DECAY_OVERLAP:-3}
 SHAPE_SHARDS=${SHAPE_SHARDS:-2}
 EVAL=${EVAL:-1}
-ENCODER_VIEWS=${ENCODER_VIEWS:-1}
-FIT_STEPS=${FIT_STEPS:-0}
-FIT_QUERIES=${FIT_QUERIES:-2048}
+ENCODER_VIEWS=${ENCODER_VIEWS:-16}
+FIT_STEPS=${FIT_STEPS:-50}
+FIT_QUERIES=${FIT_QUERIES:-512}
 LAYOUT_GAIN=${LAYOUT_GAIN:-2}
-CODE_GAIN=${CODE_GAIN:-1}
+CODE_GAIN=${CODE_GAIN:-2}
 
 if ! [[ "$DECODER_CYCLES" =~ ^[0-9]+$ ]]; then
   echo "invalid DECODER_CYCLES: need a whole number of decoder cycles (0 for none), got '$DECODER_CYCLES'" >&2

@@ -1117,25 +1117,32 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     );
     // The recipe's denoiser adds its category to every graph layer, as the shipped one does.
     assert_eq!(m["denoiser"]["config"]["category_layers"], true, "{m:#}");
-    // Two decoder cycles, encoder frozen, continue the first prior, each the last, before the
-    // denoiser; `train encode` makes the codes from the last one by NAP's encoding (as
-    // shipped), and the manifest keeps the whole lineage.
+    // Three decoder cycles, encoder frozen, continue the first prior, each the last, before
+    // the denoiser; `train encode` makes the codes from the last one as shipped (the mean of
+    // 16 encoder views, fitted 50 steps on 512 SDF samples), and the manifest keeps the whole
+    // lineage and the encoding.
     assert!(!err.contains("+ physnap train install-shape"), "{err}");
     assert!(
-        err.contains("train encode --weights") && err.contains("--encoder-views 1 --fit-steps 0"),
+        err.contains("train encode --weights")
+            && err.contains("--encoder-views 16 --fit-steps 50 --fit-queries 512"),
         "{err}"
     );
     assert!(
-        err.find("--out {}/shape_decoder2".replace("{}", s(&out)).as_str())
+        err.find("--out {}/shape_decoder3".replace("{}", s(&out)).as_str())
             < err.find("+ physnap train diffusion"),
         "cycles before the denoiser: {err}"
     );
-    assert!(m["training"]["shape"]["encoding"].is_null(), "{m:#}");
+    assert_eq!(
+        m["training"]["shape"]["encoding"],
+        serde_json::json!({"views": 16, "fit_steps": 50, "fit_queries": 512, "fit_lr": 0.01,
+            "fit_prox": 0.0}),
+        "{m:#}"
+    );
     assert_eq!(
         m["training"]["shape"]["config"]["freeze_encoder"], true,
         "{m:#}"
     );
-    assert_eq!(m["training"]["shape"]["config"]["seed"], 1, "{m:#}");
+    assert_eq!(m["training"]["shape"]["config"]["seed"], 2, "{m:#}");
     assert_eq!(m["training"]["shape_base"]["steps"], 4, "{m:#}");
     assert_eq!(
         m["training"]["shape_base"]["config"]["freeze_encoder"], false,
@@ -1163,24 +1170,32 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     assert_eq!(diffusion_runs_with(&err, "--batch-shards 2"), 5, "{err}");
     assert_eq!(diffusion_runs_with(&err, "--layout-gain 2"), 5, "{err}");
     assert_eq!(m["training"]["diffusion"]["layout_gain"], 2.0, "{m:#}");
-    // NAP's scaling of the shape codes (CODE_GAIN 1), as shipped.
-    assert_eq!(diffusion_runs_with(&err, "--code-gain 1"), 5, "{err}");
-    assert_eq!(m["training"]["diffusion"]["code_gain"], 1.0, "{m:#}");
+    // The shape codes at twice NAP's scale too (CODE_GAIN 2), as shipped.
+    assert_eq!(diffusion_runs_with(&err, "--code-gain 2"), 5, "{err}");
+    assert_eq!(m["training"]["diffusion"]["code_gain"], 2.0, "{m:#}");
     let cycles = m["training"]["shape_cycles"].as_array().unwrap();
-    assert_eq!(cycles.len(), 1, "{m:#}");
-    assert_eq!(cycles[0]["config"]["seed"], 0, "{m:#}");
-    assert_eq!(cycles[0]["config"]["freeze_encoder"], true, "{m:#}");
-    // Each cycle with its own eikonal weight, as the shipped decoder was trained: 0.01, 0.03;
-    // no wrong-side term (DECODER_WRONG_SIDE "0 0").
+    assert_eq!(cycles.len(), 2, "{m:#}");
+    for (i, c) in cycles.iter().enumerate() {
+        assert_eq!(c["config"]["seed"], i, "{m:#}");
+        assert_eq!(c["config"]["freeze_encoder"], true, "{m:#}");
+    }
+    // Each cycle with its own eikonal and wrong-side weights, as the shipped decoder was
+    // trained: eikonal 0.01, 0.03, 0.03; the wrong-side term in the third only
+    // (DECODER_WRONG_SIDE "0 0 10").
     assert_eq!(cycles[0]["config"]["eikonal"], 0.01, "{m:#}");
+    assert_eq!(cycles[1]["config"]["eikonal"], 0.03, "{m:#}");
+    assert_eq!(cycles[1]["config"]["wrong_side"], 0.0, "{m:#}");
     assert_eq!(m["training"]["shape"]["config"]["eikonal"], 0.03, "{m:#}");
-    assert_eq!(m["training"]["shape"]["config"]["wrong_side"], 0.0, "{m:#}");
-    assert!(err.contains("--wrong-side 0 "), "{err}");
+    assert_eq!(
+        m["training"]["shape"]["config"]["wrong_side"], 10.0,
+        "{m:#}"
+    );
+    assert_eq!(err.matches("--wrong-side 0 ").count(), 2, "{err}");
     // Only the last state gets a retrieval codebook: the first four denoiser runs skip
     // theirs (the recipe's time budget), the last builds it (above).
     assert_eq!(err.matches("--no-codebook").count(), 4, "{err}");
     // A cycle trained on the weights directory itself: `train encode` of it follows its start
-    // into the manifest and keeps that history (the first prior, then both cycles).
+    // into the manifest and keeps that history (the first prior, then the three cycles).
     let c3 = out.join("cycle_on_weights");
     ok(&[
         "train",
@@ -1220,17 +1235,17 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         .collect();
     assert_eq!(
         seeds,
-        [serde_json::json!(0), serde_json::json!(1)],
+        [0, 1, 2].map(|i| serde_json::json!(i)),
         "{lineage:#}"
     );
     // Installing without one drops the stale codebook, file and manifest entry, and says how
     // to build it; `train codebook` puts it back.
-    let d2 = out.join("shape_decoder2");
+    let d3 = out.join("shape_decoder3");
     let said = ok(&[
         "train",
         "install-shape",
         "--shape",
-        s(&d2),
+        s(&d3),
         "--weights",
         s(&w),
         "--no-codebook",
@@ -1238,7 +1253,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     assert!(said.contains("physnap train codebook"), "{said}");
     assert!(!w.join("codebook.safetensors").exists());
     assert!(read(&w.join("manifest.json"))["codebook"].is_null());
-    ok(&["train", "codebook", "--shape", s(&d2), "--weights", s(&w)]);
+    ok(&["train", "codebook", "--shape", s(&d3), "--weights", s(&w)]);
     assert!(
         read(&w.join("manifest.json"))["codebook"]["config"]["rows"]
             .as_u64()
@@ -1298,7 +1313,8 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     // first prior with burn's autodiff (SHAPE_BACKWARD=burn), the single-pass steps of the
     // weights shipped before (DENOISER_SHARDS=1, SHAPE_SHARDS=1), one decoder cycle without
     // the eikonal term and with the wrong-side term (DECODER_WRONG_SIDE=10), NAP's feature
-    // scales for the layout (LAYOUT_GAIN=1) and twice them for the codes (CODE_GAIN=2).
+    // scales for the layout and the codes (LAYOUT_GAIN=1, CODE_GAIN=1: the weights before lg2)
+    // and a small fitted encoding.
     let two = root.path().join("two");
     let o = repro(
         &two,
@@ -1316,7 +1332,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             ("FIT_STEPS", "2"),
             ("FIT_QUERIES", "32"),
             ("LAYOUT_GAIN", "1"),
-            ("CODE_GAIN", "2"),
+            ("CODE_GAIN", "1"),
         ],
     );
     let err = String::from_utf8_lossy(&o.stderr);
@@ -1332,9 +1348,10 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     assert_eq!(summary["overlap_weight"], 2.0, "{summary:#}");
     assert_eq!(diffusion_runs_with(&err, "--batch-shards 1"), 2, "{err}");
     let m = read(&two.join("weights/manifest.json"));
-    // LAYOUT_GAIN=1: NAP's scaling, the denoisers shipped before lg2.
+    // LAYOUT_GAIN=1, CODE_GAIN=1: NAP's scaling, the denoisers shipped before lg2.
     assert_eq!(m["training"]["diffusion"]["layout_gain"], 1.0, "{m:#}");
-    assert_eq!(m["training"]["diffusion"]["code_gain"], 2.0, "{m:#}");
+    assert_eq!(m["training"]["diffusion"]["code_gain"], 1.0, "{m:#}");
+    assert_eq!(diffusion_runs_with(&err, "--code-gain 1"), 2, "{err}");
     assert_eq!(
         m["training"]["shape_base"]["config"]["decoder_backward"], "burn",
         "{m:#}"

@@ -80,8 +80,9 @@
 //! readable to G_z times the noise, so the reverse process has more steps to place them.
 //! Recorded, applied and checked on resume exactly as the layout gain. Measured with G_z = 2
 //! on the fitted codes of the ws10 decoder (EVALUATION.md, "Code gain", candidate fcg2):
-//! category accuracy 81.6 % over nine seeds against the shipped 80.3 %, 1-NNA ≤ 0.69; not
-//! shipped yet, so the recipe's `CODE_GAIN` and the flag's default stay NAP's 1.
+//! category accuracy 81.6 % over nine seeds against lg2's 80.3 %, 1-NNA ≤ 0.69; the shipped
+//! weights use G_z = 2 since 2026-11-30 (fcg2; the recipe's `CODE_GAIN`), while the flag's
+//! default stays NAP's 1.
 //!
 //! Category conditioning: each sample carries its object's category index, replaced
 //! by the "no category" row with probability `category_dropout`, so one model serves both the

@@ -3,6 +3,11 @@
 #
 #   bash scripts/reproduce-weights.sh [OUT]        # default OUT: repro
 #
+# Interrupted, the same command goes on where it stopped: every finished stage is skipped (it
+# left OUT/stages/NAME.done), the denoiser's resumed runs continue from their last checkpoint
+# and any other stage starts again. OUT/stages.tsv gives each stage's wall seconds; a rerun
+# with other knobs than OUT/recipe.knobs is refused, naming the knob.
+#
 # data synth -> data import -> train shape (12,000 steps, 128 parts x 128 queries x 64 surface
 # points a batch, host backward pass, the parts of each step in two slices) -> three more cosine
 # cycles of the shape prior's decoder with its encoder frozen (train shape --init-from the
@@ -201,22 +206,54 @@ if ! [[ "$DECAY_OVERLAP" =~ ^[0-9]*\.?[0-9]+$ ]]; then
   echo "invalid DECAY_OVERLAP: need a non-negative number (the box-overlap penalty of the run that ends at STEPS), got '$DECAY_OVERLAP'" >&2
   exit 2
 fi
+# The knobs a run into OUT was started with are kept in OUT/recipe.knobs; a rerun into the same
+# OUT must use the same ones (a recipe continued with other knobs would mix two recipes).
+knobs=(OBJECTS SHAPE_STEPS STAGE1 STAGE2 STEPS BATCH_OBJECTS CHECKPOINT_EVERY IMPORT_FLAGS
+       SHAPE_FLAGS DENOISER_FLAGS DECODER_STEPS DECODER_FLAGS DECODER_CYCLES DECODER_EIKONAL
+       DECODER_WRONG_SIDE SHAPE_BATCH SHAPE_BACKWARD DENOISER_SHARDS RESTART_STEPS
+       RESTART_OVERLAP RESTART_SHARDS DECAY_OVERLAP SHAPE_SHARDS ENCODER_VIEWS FIT_STEPS
+       FIT_QUERIES LAYOUT_GAIN CODE_GAIN)
+if [ -f "$OUT/recipe.knobs" ]; then
+  while IFS= read -r line; do
+    k=${line%%=*}
+    [[ " ${knobs[*]} " == *" $k "* ]] || continue
+    if [ "$line" != "$k=${!k}" ]; then
+      echo "invalid $k for $OUT: its recipe was started with $line, this run has $k=${!k} (continue it with the same knobs, or use another OUT)" >&2
+      exit 2
+    fi
+  done < "$OUT/recipe.knobs"
+fi
+# Each stage that finishes leaves OUT/stages/NAME.done and a line in OUT/stages.tsv (name,
+# wall seconds, command), and a rerun into the same OUT skips it: an interrupted recipe goes on
+# from the stage it stopped in (the denoiser's resumed runs from their last checkpoint, any
+# other stage from its start), and stages.tsv times every stage, whatever the interruptions.
 run() {
+  local name=$1
+  shift
+  if [ -f "$OUT/stages/$name.done" ]; then
+    echo "= $name done before, skipped: physnap $*" >&2
+    return
+  fi
   echo "+ physnap $*" >&2
+  local t0
+  t0=$(date +%s)
   "$PHYSNAP_BIN" "$@"
+  printf '%s\t%s\t%s\n' "$name" "$(( $(date +%s) - t0 ))" "physnap $*" >> "$OUT/stages.tsv"
+  touch "$OUT/stages/$name.done"
 }
 
-mkdir -p "$OUT"
+mkdir -p "$OUT/stages"
+[ -f "$OUT/recipe.knobs" ] || for k in "${knobs[@]}"; do printf '%s=%s\n' "$k" "${!k}"; done > "$OUT/recipe.knobs"
 start=$(date +%s)
-run data synth --out "$OUT/synth" --objects "$OBJECTS" --seed 0
+run synth data synth --out "$OUT/synth" --objects "$OBJECTS" --seed 0
 # shellcheck disable=SC2086
-run data import --partnet-mobility "$OUT/synth" --out "$OUT/train" $IMPORT_FLAGS
+run import data import --partnet-mobility "$OUT/synth" --out "$OUT/train" $IMPORT_FLAGS
 # The shipped shape prior's decoder gradients came from the host backward pass (train shape's
 # default); burn's autodiff gives the same gradients up to float rounding, but rounding
 # differences grow over training, so the recipe names the shipped path. The val IoU is logged
 # every 4,000 steps, as in the shipped prior's run (every 1,000 costs ≈ 1.5 min more).
 # shellcheck disable=SC2086
-run train shape --data "$OUT/train" --out "$OUT/shape" --steps "$SHAPE_STEPS" --seed 0 \
+run shape train shape --data "$OUT/train" --out "$OUT/shape" --steps "$SHAPE_STEPS" --seed 0 \
   --decoder-backward "$SHAPE_BACKWARD" --batch-shards "$SHAPE_SHARDS" --eval-every 4000 \
   $SHAPE_BATCH $SHAPE_FLAGS
 # The decoder limits the shape IoU most (EVALUATION.md); cycles with the encoder frozen improve
@@ -232,7 +269,7 @@ last="$OUT/shape"
 if [ "$DECODER_STEPS" != 0 ]; then
   for ((cycle = 1; cycle <= DECODER_CYCLES; cycle++)); do
     # shellcheck disable=SC2086
-    run train shape --data "$OUT/train" --out "$OUT/shape_decoder$cycle" --steps "$DECODER_STEPS" \
+    run "decoder$cycle" train shape --data "$OUT/train" --out "$OUT/shape_decoder$cycle" --steps "$DECODER_STEPS" \
       --seed $((cycle - 1)) --init-from "$last" --freeze-encoder --lr 5e-4 \
       --eikonal "${eikonal[$((cycle - 1))]}" --wrong-side "${wrong_side[$((cycle - 1))]}" \
       --batch-shards "$SHAPE_SHARDS" $SHAPE_BATCH $SHAPE_FLAGS $DECODER_FLAGS
@@ -241,7 +278,7 @@ if [ "$DECODER_STEPS" != 0 ]; then
 fi
 # Every part's code by the last decoder (the denoiser learns these; the report records the
 # encoding and the runs the prior continued, which the manifest keeps).
-run train encode --weights "$last" --data "$OUT/train" --out "$OUT/codes" \
+run encode train encode --weights "$last" --data "$OUT/train" --out "$OUT/codes" \
   --encoder-views "$ENCODER_VIEWS" --fit-steps "$FIT_STEPS" --fit-queries "$FIT_QUERIES"
 common=(--data "$OUT/train" --shape "$OUT/codes" --out "$OUT/weights"
         --batch-objects "$BATCH_OBJECTS" --noise-levels 4 --lr 5e-4
@@ -251,7 +288,7 @@ common=(--data "$OUT/train" --shape "$OUT/codes" --out "$OUT/weights"
 # continued by another.
 # Stage 1: constant learning rate, no EMA.
 # shellcheck disable=SC2086
-run train diffusion "${common[@]}" --steps "$STAGE1" --lr-final-factor 1 --ema-decay 0 \
+run denoiser_stage1 train diffusion "${common[@]}" --steps "$STAGE1" --lr-final-factor 1 --ema-decay 0 \
   --batch-shards "$DENOISER_SHARDS" --no-codebook $DENOISER_FLAGS
 # Then: cosine decay from STAGE1 to 0.1 x lr over the run to STEPS, EMA 0.999 from STAGE1 (in
 # two runs when STAGE2 is set; DECAY_OVERLAP is the box-overlap penalty of the run that ends at
@@ -260,12 +297,12 @@ decay=(--steps "$STEPS" --lr-decay-start "$STAGE1" --lr-final-factor 0.1 --ema-d
        --batch-shards "$DENOISER_SHARDS")
 if [ "$STAGE2" != 0 ]; then
   # shellcheck disable=SC2086
-  run train diffusion "${common[@]}" "${decay[@]}" --stop-at "$STAGE2" --no-codebook $DENOISER_FLAGS
+  run denoiser_stage2 train diffusion "${common[@]}" "${decay[@]}" --stop-at "$STAGE2" --no-codebook $DENOISER_FLAGS
 fi
 decay_codebook=(--no-codebook)
 [ "${#restarts[@]}" = 0 ] && decay_codebook=()
 # shellcheck disable=SC2086
-run train diffusion "${common[@]}" "${decay[@]}" --overlap-weight "$DECAY_OVERLAP" \
+run denoiser_decay train diffusion "${common[@]}" "${decay[@]}" --overlap-weight "$DECAY_OVERLAP" \
   "${decay_codebook[@]}" $DENOISER_FLAGS
 # More cosine cycles (warm restarts): back to lr at the previous count, cosine decay to 0.1 x lr
 # at the next, the weight EMA continued. The one decay to 14,000 reaches category accuracy
@@ -276,15 +313,17 @@ for k in "${!restarts[@]}"; do
   cb=(--no-codebook)
   [ "$k" = $((${#restarts[@]} - 1)) ] && cb=()
   # shellcheck disable=SC2086
-  run train diffusion "${common[@]}" --steps "${restarts[$k]}" --lr-decay-start "$prev" \
+  run "denoiser_restart$((k + 1))" train diffusion "${common[@]}" --steps "${restarts[$k]}" --lr-decay-start "$prev" \
     --lr-final-factor 0.1 --ema-decay 0.999 --resume --batch-shards "$RESTART_SHARDS" \
     --overlap-weight "${overlap[$k]:-0}" "${cb[@]}" $DENOISER_FLAGS
   prev=${restarts[$k]}
 done
 if [ "$EVAL" = 1 ]; then
-  run eval shape --weights "$OUT/weights" --data "$OUT/train" --parts 64 --write-manifest
-  run eval generative --weights "$OUT/weights" --data "$OUT/train" --samples 48 --refs 48 \
+  run eval_shape eval shape --weights "$OUT/weights" --data "$OUT/train" --parts 64 --write-manifest
+  run eval_generative eval generative --weights "$OUT/weights" --data "$OUT/train" --samples 48 --refs 48 \
     --per-category 4 --states 4 --points 256 --out "$OUT/weights/eval_generative.json" \
     --write-manifest
 fi
-echo "weights in $OUT/weights ($(( ($(date +%s) - start) / 60 )) min)" >&2
+total=$(awk -F'\t' '{ s += $2 } END { print s + 0 }' "$OUT/stages.tsv")
+echo "weights in $OUT/weights (this run $(( ($(date +%s) - start) / 60 )) min; every stage, \
+$(( total / 60 )) min in all, in $OUT/stages.tsv)" >&2

@@ -1071,6 +1071,9 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             .env("CHECKPOINT_EVERY", "1")
             .env("IMPORT_FLAGS", "--uniform 256 --near 256 --surface 64")
             .env("SHAPE_BATCH", "--batch-parts 4 --queries-per-part 64")
+            // A narrow shape prior: the recipe's fitted encoding (16 views, 50 steps a part)
+            // runs in seconds instead of minutes in a debug build.
+            .env("SHAPE_FLAGS", "--decoder-hidden 32 --encoder-hidden 32")
             .env("DENOISER_FLAGS", "--width 32 --layers 1")
             .env("DECODER_STEPS", "2")
             .env("EVAL", "0")
@@ -1194,6 +1197,66 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     // Only the last state gets a retrieval codebook: the first four denoiser runs skip
     // theirs (the recipe's time budget), the last builds it (above).
     assert_eq!(err.matches("--no-codebook").count(), 4, "{err}");
+    // Every stage is timed in stages.tsv (name, wall seconds, command): data 2, prior 1, three
+    // cycles, the encoding and the five denoiser runs.
+    let tsv = std::fs::read_to_string(out.join("stages.tsv")).unwrap();
+    let stages: Vec<&str> = tsv.lines().map(|l| l.split('\t').next().unwrap()).collect();
+    assert_eq!(
+        stages,
+        [
+            "synth",
+            "import",
+            "shape",
+            "decoder1",
+            "decoder2",
+            "decoder3",
+            "encode",
+            "denoiser_stage1",
+            "denoiser_stage2",
+            "denoiser_decay",
+            "denoiser_restart1",
+            "denoiser_restart2"
+        ],
+        "{tsv}"
+    );
+    // A rerun into the same OUT skips every finished stage and changes nothing; one whose last
+    // stage did not finish runs that stage alone, resumed from its checkpoint.
+    let manifest_bytes = std::fs::read(w.join("manifest.json")).unwrap();
+    let again = |extra: &[(&str, &str)]| {
+        let mut knobs = vec![("RESTART_STEPS", "7 8"), ("RESTART_OVERLAP", "0 3")];
+        knobs.extend_from_slice(extra);
+        repro(&out, ["2", "3", "5"], &knobs)
+    };
+    let o = again(&[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(!err.contains("+ physnap"), "{err}");
+    assert_eq!(err.matches("done before, skipped").count(), 12, "{err}");
+    assert_eq!(
+        std::fs::read(w.join("manifest.json")).unwrap(),
+        manifest_bytes
+    );
+    std::fs::remove_file(out.join("stages/denoiser_restart2.done")).unwrap();
+    let o = again(&[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert_eq!(err.matches("+ physnap").count(), 1, "{err}");
+    assert!(
+        err.contains("+ physnap train diffusion") && err.contains("--resume"),
+        "{err}"
+    );
+    assert_eq!(read(&w.join("checkpoint.json"))["step"], 8);
+    // Other knobs than the ones OUT was started with are refused, by name, before anything runs.
+    let o = again(&[("CODE_GAIN", "1")]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("invalid CODE_GAIN")
+            && err.contains("CODE_GAIN=2")
+            && err.contains("CODE_GAIN=1"),
+        "{err}"
+    );
+    assert!(!err.contains("+ physnap"), "{err}");
     // A cycle trained on the weights directory itself: `train encode` of it follows its start
     // into the manifest and keeps that history (the first prior, then the three cycles).
     let c3 = out.join("cycle_on_weights");
@@ -1213,6 +1276,10 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         "4",
         "--queries-per-part",
         "64",
+        "--decoder-hidden",
+        "32",
+        "--encoder-hidden",
+        "32",
     ]);
     let codes3 = out.join("codes3");
     ok(&[

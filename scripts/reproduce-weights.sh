@@ -4,8 +4,8 @@
 #   bash scripts/reproduce-weights.sh [OUT]        # default OUT: repro
 #
 # Interrupted, the same command goes on where it stopped: every finished stage is skipped (it
-# left OUT/stages/NAME.done), the denoiser's resumed runs continue from their last checkpoint
-# and any other stage starts again. OUT/stages.tsv gives each stage's wall seconds; a rerun
+# left OUT/stages/NAME.done), train shape and the denoiser's resumed runs continue from their
+# last checkpoint and any other stage starts again. OUT/stages.tsv gives each stage's wall seconds; a rerun
 # with other knobs than OUT/recipe.knobs is refused, naming the knob.
 #
 # data synth -> data import -> train shape (12,000 steps, 128 parts x 128 queries x 64 surface
@@ -225,8 +225,8 @@ if [ -f "$OUT/recipe.knobs" ]; then
 fi
 # Each stage that finishes leaves OUT/stages/NAME.done and a line in OUT/stages.tsv (name,
 # wall seconds, command), and a rerun into the same OUT skips it: an interrupted recipe goes on
-# from the stage it stopped in (the denoiser's resumed runs from their last checkpoint, any
-# other stage from its start), and stages.tsv times every stage, whatever the interruptions.
+# from the stage it stopped in (train shape and the denoiser's resumed runs from their last
+# checkpoint, any other stage from its start), and stages.tsv times each stage's last attempt.
 run() {
   local name=$1
   shift
@@ -242,6 +242,13 @@ run() {
   touch "$OUT/stages/$name.done"
 }
 
+# A train shape stage interrupted after a checkpoint (every 1,000 steps) goes on from it:
+# --resume, the same batch stream; Adam's moments restart there, so the prior is close to, not
+# bit for bit, an uninterrupted run's.
+resume_shape() {
+  if [ -f "$1/shape_checkpoint.json" ]; then echo --resume; fi
+}
+
 mkdir -p "$OUT/stages"
 [ -f "$OUT/recipe.knobs" ] || for k in "${knobs[@]}"; do printf '%s=%s\n' "$k" "${!k}"; done > "$OUT/recipe.knobs"
 start=$(date +%s)
@@ -252,10 +259,10 @@ run import data import --partnet-mobility "$OUT/synth" --out "$OUT/train" $IMPOR
 # default); burn's autodiff gives the same gradients up to float rounding, but rounding
 # differences grow over training, so the recipe names the shipped path. The val IoU is logged
 # every 4,000 steps, as in the shipped prior's run (every 1,000 costs ≈ 1.5 min more).
-# shellcheck disable=SC2086
+# shellcheck disable=SC2086,SC2046
 run shape train shape --data "$OUT/train" --out "$OUT/shape" --steps "$SHAPE_STEPS" --seed 0 \
   --decoder-backward "$SHAPE_BACKWARD" --batch-shards "$SHAPE_SHARDS" --eval-every 4000 \
-  $SHAPE_BATCH $SHAPE_FLAGS
+  $SHAPE_BATCH $SHAPE_FLAGS $(resume_shape "$OUT/shape")
 # The decoder limits the shape IoU most (EVALUATION.md); cycles with the encoder frozen improve
 # it while the encoder, and with NAP's encoding every code, stays as the first prior made it.
 # The eikonal term keeps the decoder's field steep where guidance moves the codes: without it
@@ -268,11 +275,12 @@ run shape train shape --data "$OUT/train" --out "$OUT/shape" --steps "$SHAPE_STE
 last="$OUT/shape"
 if [ "$DECODER_STEPS" != 0 ]; then
   for ((cycle = 1; cycle <= DECODER_CYCLES; cycle++)); do
-    # shellcheck disable=SC2086
+    # shellcheck disable=SC2086,SC2046
     run "decoder$cycle" train shape --data "$OUT/train" --out "$OUT/shape_decoder$cycle" --steps "$DECODER_STEPS" \
       --seed $((cycle - 1)) --init-from "$last" --freeze-encoder --lr 5e-4 \
       --eikonal "${eikonal[$((cycle - 1))]}" --wrong-side "${wrong_side[$((cycle - 1))]}" \
-      --batch-shards "$SHAPE_SHARDS" $SHAPE_BATCH $SHAPE_FLAGS $DECODER_FLAGS
+      --batch-shards "$SHAPE_SHARDS" $SHAPE_BATCH $SHAPE_FLAGS $DECODER_FLAGS \
+      $(resume_shape "$OUT/shape_decoder$cycle")
     last="$OUT/shape_decoder$cycle"
   done
 fi

@@ -1246,6 +1246,53 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         "{err}"
     );
     assert_eq!(read(&w.join("checkpoint.json"))["step"], 8);
+    // A shape stage stopped at a checkpoint goes on from it: the third cycle, stopped after
+    // one of its two steps, is the only stage the rerun runs, with --resume.
+    let d3 = out.join("shape_decoder3");
+    std::fs::remove_dir_all(&d3).unwrap();
+    std::fs::remove_file(out.join("stages/decoder3.done")).unwrap();
+    ok(&[
+        "train",
+        "shape",
+        "--data",
+        s(&out.join("train")),
+        "--out",
+        s(&d3),
+        "--steps",
+        "2",
+        "--seed",
+        "2",
+        "--init-from",
+        s(&out.join("shape_decoder2")),
+        "--freeze-encoder",
+        "--lr",
+        "5e-4",
+        "--wrong-side",
+        "10",
+        "--batch-parts",
+        "4",
+        "--queries-per-part",
+        "64",
+        "--decoder-hidden",
+        "32",
+        "--encoder-hidden",
+        "32",
+        "--stop-at",
+        "1",
+        "--checkpoint-every",
+        "1",
+    ]);
+    assert!(d3.join("shape_checkpoint.json").is_file());
+    let o = again(&[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert_eq!(err.matches("+ physnap").count(), 1, "{err}");
+    assert!(
+        err.contains(&format!("--out {} ", s(&d3))) && err.contains("--resume"),
+        "{err}"
+    );
+    assert!(!d3.join("shape_checkpoint.json").exists());
+    assert_eq!(read(&d3.join("shape_train.json"))["steps"], 2);
     // Other knobs than the ones OUT was started with are refused, by name, before anything runs.
     let o = again(&[("CODE_GAIN", "1")]);
     let err = String::from_utf8_lossy(&o.stderr);

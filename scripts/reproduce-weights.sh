@@ -6,7 +6,11 @@
 # Interrupted, the same command goes on where it stopped: every finished stage is skipped (it
 # left OUT/stages/NAME.done), train shape and the denoiser's resumed runs continue from their
 # last checkpoint and any other stage starts again. OUT/stages.tsv gives each stage's wall seconds; a rerun
-# with other knobs than OUT/recipe.knobs is refused, naming the knob.
+# with other knobs than OUT/recipe.knobs is refused, naming the knob. UNTIL=NAME stops after
+# that stage (a stage name of stages.tsv: synth, import, shape, decoderN, encode,
+# denoiser_stage1, denoiser_stage2, denoiser_decay, denoiser_restartN, eval_shape,
+# eval_generative), to split the recipe over several sittings; it is not one of the knobs a
+# rerun must repeat.
 #
 # data synth -> data import -> train shape (12,000 steps, 128 parts x 128 queries x 64 surface
 # points a batch, host backward pass, the parts of each step in two slices) -> three more cosine
@@ -74,6 +78,7 @@
 #   --fit-steps and --fit-queries, how the codes the denoiser learns are made (as shipped since
 #   fcg2, shape IoU 0.860 on the 64 val parts; 1, 0, 2048: NAP's encoding, the weights before)
 #   EVAL (1: run eval shape and eval generative; 0: skip)
+#   UNTIL ("": run every stage; a stage name: stop after it, above)
 # Earlier shipped weights (their manifests under docs/eval/):
 #   lg2 (2026-11-30, forty-eighth to fiftieth sessions, the weights before fcg2;
 #     docs/eval/code_gain/previous_manifest.json): DECODER_CYCLES=2 DECODER_EIKONAL="0.01 0.03"
@@ -114,6 +119,7 @@ RESTART_SHARDS=${RESTART_SHARDS:-2}
 DECAY_OVERLAP=${DECAY_OVERLAP:-3}
 SHAPE_SHARDS=${SHAPE_SHARDS:-2}
 EVAL=${EVAL:-1}
+UNTIL=${UNTIL:-}
 ENCODER_VIEWS=${ENCODER_VIEWS:-16}
 FIT_STEPS=${FIT_STEPS:-50}
 FIT_QUERIES=${FIT_QUERIES:-512}
@@ -163,6 +169,10 @@ for knob in LAYOUT_GAIN CODE_GAIN; do
     exit 2
   fi
 done
+if [ -n "$UNTIL" ] && ! [[ "$UNTIL" =~ ^(synth|import|shape|decoder[0-9]+|encode|denoiser_(stage1|stage2|decay|restart[0-9]+)|eval_shape|eval_generative)$ ]]; then
+  echo "invalid UNTIL: need a stage name (synth, import, shape, decoderN, encode, denoiser_stage1, denoiser_stage2, denoiser_decay, denoiser_restartN, eval_shape, eval_generative), got '$UNTIL'" >&2
+  exit 2
+fi
 if [ "$SHAPE_BACKWARD" != burn ] && [ "$SHAPE_BACKWARD" != host ]; then
   echo "invalid SHAPE_BACKWARD: need burn or host, got '$SHAPE_BACKWARD'" >&2
   exit 2
@@ -240,6 +250,10 @@ run() {
   "$PHYSNAP_BIN" "$@"
   printf '%s\t%s\t%s\n' "$name" "$(( $(date +%s) - t0 ))" "physnap $*" >> "$OUT/stages.tsv"
   touch "$OUT/stages/$name.done"
+  if [ "$name" = "$UNTIL" ]; then
+    echo "stopped after stage $name (UNTIL); the same command without UNTIL goes on from here" >&2
+    exit 0
+  fi
 }
 
 # A train shape stage interrupted after a checkpoint (every 1,000 steps) goes on from it:

@@ -1081,6 +1081,20 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             .output()
             .unwrap()
     };
+    // In two sittings: UNTIL stops after the encoding, the same command without it goes on.
+    let o = repro(
+        &out,
+        ["2", "3", "5"],
+        &[
+            ("RESTART_STEPS", "7 8"),
+            ("RESTART_OVERLAP", "0 3"),
+            ("UNTIL", "encode"),
+        ],
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("stopped after stage encode"), "{err}");
+    assert!(!err.contains("train diffusion"), "{err}");
     let o = repro(
         &out,
         ["2", "3", "5"],
@@ -1088,6 +1102,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     );
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
+    assert_eq!(err.matches("done before, skipped").count(), 7, "{err}");
     // The five runs ran in order: stage 2 stopped at 3, stage 3 resumed there and ran to 5,
     // the first restart cycle resumed at 5, decaying from there to 7, and the second, with
     // the box-overlap penalty, from 7 to 8.
@@ -1405,6 +1420,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         (&[("ENCODER_VIEWS", "-2")][..], "ENCODER_VIEWS"),
         (&[("LAYOUT_GAIN", "twice")][..], "LAYOUT_GAIN"),
         (&[("CODE_GAIN", "double")][..], "CODE_GAIN"),
+        (&[("UNTIL", "denoiser")][..], "UNTIL"),
     ] {
         let o = Command::new("bash")
             .arg(concat!(

@@ -1081,25 +1081,19 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             .output()
             .unwrap()
     };
+    // The main toy recipe into `out`, with two restart cycles, and any `extra` knobs.
+    let again = |extra: &[(&str, &str)]| {
+        let mut knobs = vec![("RESTART_STEPS", "7 8"), ("RESTART_OVERLAP", "0 3")];
+        knobs.extend_from_slice(extra);
+        repro(&out, ["2", "3", "5"], &knobs)
+    };
     // In two sittings: UNTIL stops after the encoding, the same command without it goes on.
-    let o = repro(
-        &out,
-        ["2", "3", "5"],
-        &[
-            ("RESTART_STEPS", "7 8"),
-            ("RESTART_OVERLAP", "0 3"),
-            ("UNTIL", "encode"),
-        ],
-    );
+    let o = again(&[("UNTIL", "encode")]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     assert!(err.contains("stopped after stage encode"), "{err}");
     assert!(!err.contains("train diffusion"), "{err}");
-    let o = repro(
-        &out,
-        ["2", "3", "5"],
-        &[("RESTART_STEPS", "7 8"), ("RESTART_OVERLAP", "0 3")],
-    );
+    let o = again(&[]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     assert_eq!(err.matches("done before, skipped").count(), 7, "{err}");
@@ -1237,11 +1231,6 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     // A rerun into the same OUT skips every finished stage and changes nothing; one whose last
     // stage did not finish runs that stage alone, resumed from its checkpoint.
     let manifest_bytes = std::fs::read(w.join("manifest.json")).unwrap();
-    let again = |extra: &[(&str, &str)]| {
-        let mut knobs = vec![("RESTART_STEPS", "7 8"), ("RESTART_OVERLAP", "0 3")];
-        knobs.extend_from_slice(extra);
-        repro(&out, ["2", "3", "5"], &knobs)
-    };
     let o = again(&[]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
@@ -1266,24 +1255,10 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     let d3 = out.join("shape_decoder3");
     std::fs::remove_dir_all(&d3).unwrap();
     std::fs::remove_file(out.join("stages/decoder3.done")).unwrap();
-    ok(&[
-        "train",
-        "shape",
-        "--data",
-        s(&out.join("train")),
-        "--out",
-        s(&d3),
-        "--steps",
-        "2",
-        "--seed",
-        "2",
-        "--init-from",
-        s(&out.join("shape_decoder2")),
-        "--freeze-encoder",
-        "--lr",
-        "5e-4",
-        "--wrong-side",
-        "10",
+    let train_dir = out.join("train");
+    let data = s(&train_dir);
+    // The toy prior's batch and sizes, as SHAPE_BATCH and SHAPE_FLAGS give them to the script.
+    let toy_shape = [
         "--batch-parts",
         "4",
         "--queries-per-part",
@@ -1292,11 +1267,40 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         "32",
         "--encoder-hidden",
         "32",
-        "--stop-at",
-        "1",
-        "--checkpoint-every",
-        "1",
-    ]);
+    ];
+    // One toy `train shape` cycle into `dir`: encoder frozen, the toy prior's batch and sizes.
+    let toy_cycle = |dir: &Path, extra: &[&str]| {
+        let head = [
+            "train",
+            "shape",
+            "--data",
+            data,
+            "--out",
+            s(dir),
+            "--freeze-encoder",
+        ];
+        ok(&[&head[..], &toy_shape, extra].concat());
+    };
+    let d2 = out.join("shape_decoder2");
+    toy_cycle(
+        &d3,
+        &[
+            "--steps",
+            "2",
+            "--seed",
+            "2",
+            "--init-from",
+            s(&d2),
+            "--lr",
+            "5e-4",
+            "--wrong-side",
+            "10",
+            "--stop-at",
+            "1",
+            "--checkpoint-every",
+            "1",
+        ],
+    );
     assert!(d3.join("shape_checkpoint.json").is_file());
     let o = again(&[]);
     let err = String::from_utf8_lossy(&o.stderr);
@@ -1322,27 +1326,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     // A cycle trained on the weights directory itself: `train encode` of it follows its start
     // into the manifest and keeps that history (the first prior, then the three cycles).
     let c3 = out.join("cycle_on_weights");
-    ok(&[
-        "train",
-        "shape",
-        "--data",
-        s(&out.join("train")),
-        "--out",
-        s(&c3),
-        "--steps",
-        "1",
-        "--init-from",
-        s(&w),
-        "--freeze-encoder",
-        "--batch-parts",
-        "4",
-        "--queries-per-part",
-        "64",
-        "--decoder-hidden",
-        "32",
-        "--encoder-hidden",
-        "32",
-    ]);
+    toy_cycle(&c3, &["--steps", "1", "--init-from", s(&w)]);
     let codes3 = out.join("codes3");
     ok(&[
         "train",

@@ -5,7 +5,8 @@
 #
 # Interrupted, the same command goes on where it stopped: every finished stage is skipped (it
 # left OUT/stages/NAME.done), train shape and the denoiser's resumed runs continue from their
-# last checkpoint and any other stage starts again. OUT/stages.tsv gives each stage's wall seconds; a rerun
+# last checkpoint and any other stage starts again. OUT/stages.tsv gives each stage's wall
+# seconds (of its last attempt; the train reports keep the cumulative training time); a rerun
 # with other knobs than OUT/recipe.knobs is refused, naming the knob. UNTIL=NAME stops after
 # that stage (a stage name of stages.tsv: synth, import, shape, decoderN, encode,
 # denoiser_stage1, denoiser_stage2, denoiser_decay, denoiser_restartN, eval_shape,
@@ -34,10 +35,10 @@
 # was rebuilt in session 45. Until 2026-11-29 (forty-sixth session) the recipe trained the
 # denoiser before the decoder cycles and installed them with train install-shape; with NAP's
 # encoding both orders give the same codes and weights.
-# About 2 h 41 min on 2 idle cores without the evaluations, a sum of stage timings
-# (BENCHMARKS.md "Candidate fcg2"): the first prior 47 min plus the first two cycles and the
-# import (4,087 s together), the third cycle 11 min, the codebook of fitted codes 21 min, the
-# denoiser 61 min. Inside the 3-hour budget.
+# About 2 h 39 min on 2 idle cores without the evaluations, a sum of stage timings, each
+# measured on idle cores (BENCHMARKS.md "Candidate fcg2"): the data, the first prior, its first
+# two cycles and the codebook 4,087 s together, the third cycle 11 min, the fitted encoding 19
+# min, the denoiser 61 min. Inside the 3-hour budget.
 #
 # Knobs (environment; the defaults are the shipped recipe, smaller values make a smoke run):
 #   PHYSNAP_BIN   physnap binary (default: cargo build --release, then target/release/physnap)

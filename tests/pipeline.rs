@@ -1051,6 +1051,19 @@ fn synth_import_train_generate() {
 fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     let root = tempfile::tempdir().unwrap();
     let out = root.path().join("repro");
+    // The toy shape prior's batch (SHAPE_BATCH) and sizes (SHAPE_FLAGS): a narrow prior, so
+    // the recipe's fitted encoding (16 views, 50 steps a part) runs in seconds, not minutes, in
+    // a debug build.
+    let toy_shape = [
+        "--batch-parts",
+        "4",
+        "--queries-per-part",
+        "64",
+        "--decoder-hidden",
+        "32",
+        "--encoder-hidden",
+        "32",
+    ];
     // The script at toy scale into `out`, with `stages` = (STAGE1, STAGE2, STEPS) and any
     // further knobs in `extra`.
     let repro = |out: &Path, stages: [&str; 3], extra: &[(&str, &str)]| -> Output {
@@ -1070,10 +1083,8 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             .env("BATCH_OBJECTS", "2")
             .env("CHECKPOINT_EVERY", "1")
             .env("IMPORT_FLAGS", "--uniform 256 --near 256 --surface 64")
-            .env("SHAPE_BATCH", "--batch-parts 4 --queries-per-part 64")
-            // A narrow shape prior: the recipe's fitted encoding (16 views, 50 steps a part)
-            // runs in seconds instead of minutes in a debug build.
-            .env("SHAPE_FLAGS", "--decoder-hidden 32 --encoder-hidden 32")
+            .env("SHAPE_BATCH", toy_shape[..4].join(" "))
+            .env("SHAPE_FLAGS", toy_shape[4..].join(" "))
             .env("DENOISER_FLAGS", "--width 32 --layers 1")
             .env("DECODER_STEPS", "2")
             .env("EVAL", "0")
@@ -1257,17 +1268,6 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     std::fs::remove_file(out.join("stages/decoder3.done")).unwrap();
     let train_dir = out.join("train");
     let data = s(&train_dir);
-    // The toy prior's batch and sizes, as SHAPE_BATCH and SHAPE_FLAGS give them to the script.
-    let toy_shape = [
-        "--batch-parts",
-        "4",
-        "--queries-per-part",
-        "64",
-        "--decoder-hidden",
-        "32",
-        "--encoder-hidden",
-        "32",
-    ];
     // One toy `train shape` cycle into `dir`: encoder frozen, the toy prior's batch and sizes.
     let toy_cycle = |dir: &Path, extra: &[&str]| {
         let head = [
@@ -1353,7 +1353,6 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     );
     // Installing without one drops the stale codebook, file and manifest entry, and says how
     // to build it; `train codebook` puts it back.
-    let d3 = out.join("shape_decoder3");
     let said = ok(&[
         "train",
         "install-shape",

@@ -10,9 +10,9 @@ for b in "$@"; do
   n=$(basename "$b")
   rm -rf "$work/$n"
   t0=$(date +%s.%N)
-  env ${BENCH_ENV:-} "$b" train shape --data "$data" --out "$work/$n" --steps "$steps" --seed 0 \
+  env ${BENCH_ENV:-} /usr/bin/time -f "%M KiB peak" -o "$work/$n.rss" "$b" train shape --data "$data" --out "$work/$n" --steps "$steps" --seed 0 \
     --decoder-backward host --batch-shards 2 --eval-every 1000000 --batch-parts 128 \
     --queries-per-part 128 --surface-points 64 --progress-interval 0 > "$work/$n.log" 2>&1 || { echo "$n failed"; tail "$work/$n.log"; }
   t1=$(date +%s.%N)
-  printf '%s\t%.1f s\t%s\n' "$n" "$(echo "$t1 - $t0" | bc)" "$(sha256sum < "$work/$n/shape_prior.safetensors" | cut -c1-16)"
+  printf '%s\t%.1f s\t%s\t%s\n' "$n" "$(echo "$t1 - $t0" | bc)" "$(sha256sum < "$work/$n/shape_prior.safetensors" | cut -c1-16)" "$(cat "$work/$n.rss")"
 done

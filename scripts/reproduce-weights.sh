@@ -35,10 +35,10 @@
 # was rebuilt in session 45. Until 2026-11-29 (forty-sixth session) the recipe trained the
 # denoiser before the decoder cycles and installed them with train install-shape; with NAP's
 # encoding both orders give the same codes and weights.
-# About 2 h 39 min on 2 idle cores without the evaluations, a sum of stage timings, each
-# measured on idle cores (BENCHMARKS.md "Candidate fcg2"): the data, the first prior, its first
-# two cycles and the codebook 4,087 s together, the third cycle 11 min, the fitted encoding 19
-# min, the denoiser 61 min. Inside the issue's 3-hour budget.
+# Run in one go from scratch on 2 cores (2026-11-30, fifty-fourth session): 9,561 s = 2 h 39 min
+# from synth to the last denoiser run, plus 577 s of evaluations (BENCHMARKS.md "The recipe in
+# one go", docs/eval/one_go_s54/stages.tsv). Inside the issue's 3-hour budget; ≈ 2 h 47 min at
+# the slower pace the same machine had in session 52.
 #
 # Knobs (environment; the defaults are the shipped recipe, smaller values make a smoke run):
 #   PHYSNAP_BIN   physnap binary (default: cargo build --release, then target/release/physnap)

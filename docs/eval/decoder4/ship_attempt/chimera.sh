@@ -25,3 +25,7 @@ wait
 g --samples 48 --refs 48 --seed 1 --out chimera_1.json &
 g --samples 2 --refs 2 --seed 3 --out chimera_3.json
 wait
+# Run after the first four, the same way (README.md "seeds 4 / 5"):
+g --samples 2 --refs 2 --seed 4 --out chimera_4.json &
+g --samples 2 --refs 2 --seed 5 --out chimera_5.json
+wait

@@ -409,6 +409,12 @@ struct ShapeArgs {
     /// must be trained on the new ones.
     #[arg(long, env = "PHYSNAP_SHAPE_FREEZE_DECODER")]
     freeze_decoder: bool,
+    /// Train the decoder on fixed codes instead of the encoder's (needs --freeze-encoder): a
+    /// directory with codebook.npy + codebook.json of the same data set, e.g. a `train encode`
+    /// output. The decoder learns to decode exactly those codes, so a denoiser trained on them
+    /// stays valid; the run's codebook is a copy of them and its report keeps their encoding.
+    #[arg(long, env = "PHYSNAP_SHAPE_CODES")]
+    codes: Option<PathBuf>,
     /// Evaluate val IoU every this many steps (0: only at the end).
     #[arg(long, env = "PHYSNAP_SHAPE_EVAL_EVERY", default_value_t = 1000)]
     eval_every: usize,

@@ -83,6 +83,7 @@ pub fn shape(a: ShapeArgs) -> anyhow::Result<()> {
         }),
         freeze_encoder: a.freeze_encoder,
         freeze_decoder: a.freeze_decoder,
+        codes_from: a.codes.clone(),
         eikonal: a.eikonal.unwrap_or(defaults.eikonal),
         batch_shards: a.batch_shards.unwrap_or(defaults.batch_shards),
         ..defaults

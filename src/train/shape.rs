@@ -82,7 +82,7 @@ pub const EMA_CHECKPOINT_FILE: &str = "shape_prior_ema.checkpoint.safetensors";
 /// The config fields a resumed run must share with its checkpoint (they define the run's
 /// batches, schedule and model); the others (threads, evaluation, checkpointing, the decoder's
 /// backward implementation) may change between pieces.
-const RESUME_FIELDS: [&str; 16] = [
+const RESUME_FIELDS: [&str; 17] = [
     "model",
     "max_parts",
     "steps",
@@ -99,6 +99,7 @@ const RESUME_FIELDS: [&str; 16] = [
     "ema_decay",
     "freeze_encoder",
     "freeze_decoder",
+    "codes_from",
 ];
 /// Largest number of validation parts evaluated.
 pub const MAX_VAL_PARTS: usize = 64;
@@ -172,6 +173,14 @@ pub struct ShapeTrainConfig {
     /// the codes the decoder decodes best. Every code changes, so a denoiser must be trained
     /// on the new ones; the decoder, and with it guidance and meshing of given codes, stays.
     pub freeze_decoder: bool,
+    /// Train the decoder on these fixed codes instead of the encoder's (needs
+    /// `freeze_encoder`): a directory holding a `codebook.npy` + `codebook.json` of the same
+    /// data set, e.g. a `train encode` output. Each training part's code is its row there, so
+    /// the decoder learns to decode exactly the codes a denoiser trained on that codebook
+    /// generates from, and that denoiser stays valid. The run's codebook is a copy of those
+    /// codes, its report records their encoding, and its evaluations encode the val parts by
+    /// that encoding.
+    pub codes_from: Option<PathBuf>,
     /// Weight of the eikonal term on the near-surface queries ([`eikonal_term`]; 0: off, as
     /// NAP). It asks the decoder for a field of slope 1, a signed distance, instead of the
     /// flatter field an L1 fit leaves (slope 0.3–0.5 on the shipped prior's surfaces, which
@@ -238,6 +247,7 @@ impl Default for ShapeTrainConfig {
             init_from: None,
             freeze_encoder: false,
             freeze_decoder: false,
+            codes_from: None,
             eikonal: 0.0,
             batch_shards: 2,
         }
@@ -333,6 +343,13 @@ impl ShapeTrainConfig {
                 "true with freeze_encoder",
             ));
         }
+        if let (Some(dir), false) = (&self.codes_from, self.freeze_encoder) {
+            return Err(TrainError::config(
+                "codes_from",
+                "freeze_encoder set (the fixed codes replace the encoder, which must not train)",
+                dir.display(),
+            ));
+        }
         if !(self.eikonal.is_finite() && (0.0..=100.0).contains(&self.eikonal)) {
             return Err(TrainError::config(
                 "eikonal",
@@ -406,6 +423,7 @@ impl ShapeTrainConfig {
             "init_from": self.init_from.as_ref().map(|p| p.display().to_string()),
             "freeze_encoder": self.freeze_encoder,
             "freeze_decoder": self.freeze_decoder,
+            "codes_from": self.codes_from.as_ref().map(|p| p.display().to_string()),
             "eikonal": self.eikonal,
             "batch_shards": self.batch_shards,
         })
@@ -763,24 +781,31 @@ struct Batch {
     tgt: Vec<f32>,
     /// [B × S × 3].
     surf: Vec<f32>,
+    /// [B × F] fixed codes (`codes_from`); empty when the encoder makes them.
+    codes: Vec<f32>,
 }
 
 impl Batch {
     /// Parts `start..end` of the batch.
     fn slice(&self, start: usize, end: usize, cfg: &ShapeTrainConfig) -> Batch {
         let (q, s) = (cfg.queries_per_part, cfg.surface_points);
+        let f = self.codes.len() / (self.tgt.len() / q).max(1);
         Batch {
             pts: self.pts[start * q * 3..end * q * 3].to_vec(),
             tgt: self.tgt[start * q..end * q].to_vec(),
             surf: self.surf[start * s * 3..end * s * 3].to_vec(),
+            codes: self.codes[start * f..end * f].to_vec(),
         }
     }
 }
 
+/// One step's batch of the parts `order`; `codes` ([`FixedCodes`]) adds their fixed codes.
+/// The random draws are the same with or without them.
 fn sample_batch(
     parts: &[PartSamples],
     order: &[usize],
     cfg: &ShapeTrainConfig,
+    codes: Option<&FixedCodes>,
     rng: &mut Rng,
 ) -> Batch {
     let (b, q, s) = (order.len(), cfg.queries_per_part, cfg.surface_points);
@@ -818,7 +843,71 @@ fn sample_batch(
             }
         }
     }
-    Batch { pts, tgt, surf }
+    let codes = codes.map_or_else(Vec::new, |c| {
+        order
+            .iter()
+            .flat_map(|&pi| c.row(pi).iter().copied())
+            .collect()
+    });
+    Batch {
+        pts,
+        tgt,
+        surf,
+        codes,
+    }
+}
+
+/// The fixed codes of a `codes_from` run: one row per training part, in the run's part order,
+/// and the encoding that made them.
+struct FixedCodes {
+    /// `parts × latent` codes.
+    codes: Vec<f32>,
+    latent: usize,
+    encoding: Encoding,
+}
+
+impl FixedCodes {
+    fn row(&self, part: usize) -> &[f32] {
+        &self.codes[part * self.latent..(part + 1) * self.latent]
+    }
+
+    /// The rows of `dir`'s codebook for `train`'s parts, matched by key (`<object>_<part>`);
+    /// refuses codes of another width, a part without a code (a codebook of another data set)
+    /// and an encoding it cannot read, naming the file.
+    fn read(dir: &Path, latent: usize, train: &[&PartRef]) -> Result<FixedCodes, TrainError> {
+        let book = read_codebook(dir, latent)?;
+        let index_path = dir.join(CODEBOOK_INDEX_FILE);
+        let index: Value = serde_json::from_str(
+            &std::fs::read_to_string(&index_path).map_err(TrainError::io(&index_path))?,
+        )
+        .map_err(|e| TrainError::data(&index_path, e.to_string()))?;
+        let encoding = Encoding::of_report(&index, &index_path)?;
+        let rows: std::collections::HashMap<&str, usize> = book
+            .keys
+            .iter()
+            .enumerate()
+            .filter_map(|(r, k)| k["key"].as_str().map(|k| (k, r)))
+            .collect();
+        let mut codes = Vec::with_capacity(train.len() * latent);
+        for p in train {
+            let key = format!("{}_{}", p.id, p.k);
+            let r = *rows.get(key.as_str()).ok_or_else(|| {
+                TrainError::data(
+                    &index_path,
+                    format!(
+                        "training part {key} has no code ({} codes; made from another data set?)",
+                        book.keys.len()
+                    ),
+                )
+            })?;
+            codes.extend_from_slice(&book.codes[r * latent..(r + 1) * latent]);
+        }
+        Ok(FixedCodes {
+            codes,
+            latent,
+            encoding,
+        })
+    }
 }
 
 fn to_vec<const D: usize>(t: Tensor<D>) -> Vec<f32> {
@@ -1849,8 +1938,13 @@ fn batch_loss(
 ) -> (Tensor<1>, f64) {
     let (q, s) = (cfg.queries_per_part, cfg.surface_points);
     let b = batch.tgt.len() / q;
-    let surf = Tensor::from_data(TensorData::new(batch.surf, [b, s, 3]), device);
-    let z = model.encoder.encode(surf);
+    let z = if batch.codes.is_empty() {
+        let surf = Tensor::from_data(TensorData::new(batch.surf, [b, s, 3]), device);
+        model.encoder.encode(surf)
+    } else {
+        let f = batch.codes.len() / b;
+        Tensor::from_data(TensorData::new(batch.codes, [b, f]), device)
+    };
     let reg = z.clone().square().mean().mul_scalar(cfg.w_reg);
     match cfg.decoder_backward {
         DecoderBackward::Burn => {
@@ -1947,6 +2041,8 @@ fn sharded_loss(
 struct Trainer<'a> {
     cfg: &'a ShapeTrainConfig,
     parts: &'a [PartSamples],
+    /// The training parts' fixed codes (`codes_from`).
+    codes: Option<&'a FixedCodes>,
     /// Always `Some` between steps (taken by value for the optimiser, so parameters are
     /// updated in place rather than copied).
     model: Option<ShapePrior>,
@@ -1961,7 +2057,11 @@ struct Trainer<'a> {
 
 impl<'a> Trainer<'a> {
     /// The run's starting point: `init_from`'s weights, else the seeded initialisation.
-    fn new(cfg: &'a ShapeTrainConfig, parts: &'a [PartSamples]) -> Result<Self, TrainError> {
+    fn new(
+        cfg: &'a ShapeTrainConfig,
+        parts: &'a [PartSamples],
+        codes: Option<&'a FixedCodes>,
+    ) -> Result<Self, TrainError> {
         let device = cfg.compute.autodiff();
         let model = match &cfg.init_from {
             Some(init) => load_init(init, &cfg.model, cfg.seed, &device)?,
@@ -1970,6 +2070,7 @@ impl<'a> Trainer<'a> {
         Ok(Trainer {
             cfg,
             parts,
+            codes,
             ema: (cfg.ema_decay > 0.0).then(|| Ema::new(&model, cfg.ema_decay, 0)),
             model: Some(model),
             optim: AdamConfig::new().with_epsilon(1e-8).init(),
@@ -1992,7 +2093,7 @@ impl<'a> Trainer<'a> {
             }
             order.extend(self.epoch.pop());
         }
-        let batch = sample_batch(self.parts, &order, cfg, &mut self.rng);
+        let batch = sample_batch(self.parts, &order, cfg, self.codes, &mut self.rng);
         let model = self.model.take().expect("model is present between steps");
         let (value, grads) = sharded_loss(&model, batch, cfg, &self.device);
         if !value.is_finite() || value > DIVERGED_LOSS {
@@ -2253,6 +2354,13 @@ fn run(
             "no train parts (split \"train\")",
         ));
     }
+    let fixed = match &cfg.codes_from {
+        Some(dir) => Some(FixedCodes::read(dir, cfg.model.latent, &train)?),
+        None => None,
+    };
+    // What the run's evaluations encode the val parts by: the fixed codes' encoding, else
+    // NAP's (the encoder's code).
+    let encoding = fixed.as_ref().map_or_else(Encoding::default, |f| f.encoding);
     let val_refs = val_selection(&all, cfg);
     let parts: Vec<PartSamples> = train
         .par_iter()
@@ -2261,12 +2369,12 @@ fn run(
     let grid_pts = iou_grid(cfg.iou_resolution);
     let val: Vec<ValPart> = val_refs
         .iter()
-        .map(|p| load_val_part(data, p, cfg, &Encoding::default(), &grid_pts))
+        .map(|p| load_val_part(data, p, cfg, &encoding, &grid_pts))
         .collect::<Result<_, _>>()?;
     let grid: Vec<f32> = grid_pts.into_iter().flatten().collect();
     std::fs::create_dir_all(out).map_err(TrainError::io(out))?;
 
-    let mut trainer = Trainer::new(cfg, &parts)?;
+    let mut trainer = Trainer::new(cfg, &parts, fixed.as_ref())?;
     let mut losses = Vec::with_capacity(cfg.steps);
     let mut curve = Vec::new();
     let mut train_s = 0.0;
@@ -2315,13 +2423,7 @@ fn run(
         let eval_now = done == cfg.steps || (cfg.eval_every > 0 && done % cfg.eval_every == 0);
         let (mut val_iou, mut val_l1) = (None, None);
         if eval_now && !val.is_empty() {
-            let (ious, l1) = evaluate(
-                &trainer.inference_model(),
-                &val,
-                cfg,
-                &grid,
-                &Encoding::default(),
-            );
+            let (ious, l1) = evaluate(&trainer.inference_model(), &val, cfg, &grid, &encoding);
             let iou = ious.iter().sum::<f64>() / ious.len() as f64;
             let elapsed_s = elapsed_before + t_train.elapsed().as_secs_f64();
             curve.push(EvalPoint {
@@ -2382,17 +2484,30 @@ fn run(
 
     let model = trainer.inference_model();
     save_shape_prior(&model, &out.join(WEIGHTS_FILE))?;
-    let codebook_rows = write_codebook(
-        &model,
-        data,
-        &all,
-        cfg,
-        &Encoding::default(),
-        out,
-        &mut |_, _| {},
-    )?;
+    let codebook_rows = match &cfg.codes_from {
+        // The codes the decoder was trained on are the run's codebook, byte for byte.
+        Some(dir) => {
+            for file in [CODEBOOK_FILE, CODEBOOK_INDEX_FILE] {
+                let (src, dst) = (dir.join(file), out.join(file));
+                if src != dst {
+                    let bytes = std::fs::read(&src).map_err(TrainError::io(&src))?;
+                    write_atomic(&dst, &bytes)?;
+                }
+            }
+            read_codebook(out, cfg.model.latent)?.keys.len()
+        }
+        None => write_codebook(
+            &model,
+            data,
+            &all,
+            cfg,
+            &Encoding::default(),
+            out,
+            &mut |_, _| {},
+        )?,
+    };
     let report = report(codebook_rows, curve);
-    let doc = json!({
+    let mut doc = json!({
         "format": REPORT_FORMAT,
         "config": cfg.to_json(),
         "data": data.display().to_string(),
@@ -2411,6 +2526,10 @@ fn run(
         "threads": rayon::current_num_threads(),
         "device": cfg.compute.name(),
     });
+    if encoding != Encoding::default() {
+        // As `encode_shape_dir` records it: what `eval shape` and `train diffusion` check.
+        doc["encoding"] = encoding.to_json();
+    }
     write_atomic(
         &out.join(REPORT_FILE),
         serde_json::to_string_pretty(&doc)
@@ -2702,6 +2821,132 @@ mod tests {
         let e = cfg.validate().unwrap_err().to_string();
         assert!(
             e.contains("freeze_encoder") && e.contains("init_from"),
+            "{e}"
+        );
+    }
+
+    /// `codes_from` trains the decoder on a codebook's fixed codes (here fitted ones, as the
+    /// shipped denoiser learns): the encoder stays, the run's codebook is the given one byte
+    /// for byte with its encoding recorded, each part gets its own row, and the loss on those
+    /// codes falls; a part without a code, codes of another width and a run without the frozen
+    /// encoder are refused, naming what is wrong.
+    #[test]
+    fn codes_from_trains_the_decoder_on_the_given_codes() {
+        let (data, train, short, base) = ten_step_prior(14);
+        let base_report: Value =
+            serde_json::from_str(&std::fs::read_to_string(base.join(REPORT_FILE)).unwrap())
+                .unwrap();
+        let fit = Encoding {
+            views: 2,
+            fit_steps: 5,
+            fit_queries: 64,
+            fit_prox: 0.0,
+        };
+        let codes = data.path().join("codes");
+        encode_shape_dir(
+            &base.join(WEIGHTS_FILE),
+            &base_report,
+            &train,
+            &codes,
+            &fit,
+            &mut |_, _| {},
+        )
+        .unwrap();
+        let cfg = ShapeTrainConfig {
+            init_from: Some(base.join(WEIGHTS_FILE)),
+            freeze_encoder: true,
+            codes_from: Some(codes.clone()),
+            steps: 60,
+            eval_every: 0,
+            seed: 1,
+            ..short.clone()
+        };
+        let out = data.path().join("on_codes");
+        let rep = train_shape(&train, &cfg, &out, &mut |_| {}).unwrap();
+        assert!(
+            rep.final_loss < 0.9 * rep.initial_loss,
+            "loss {} -> {}",
+            rep.initial_loss,
+            rep.final_loss
+        );
+        let read = |dir: &Path, f: &str| std::fs::read(dir.join(f)).unwrap();
+        for f in [CODEBOOK_FILE, CODEBOOK_INDEX_FILE] {
+            assert_eq!(read(&codes, f), read(&out, f), "{f}");
+        }
+        assert_ne!(read(&base, WEIGHTS_FILE), read(&out, WEIGHTS_FILE));
+        let doc: Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join(REPORT_FILE)).unwrap()).unwrap();
+        assert_eq!(Encoding::of_report(&doc, &out).unwrap(), fit);
+        assert_eq!(doc["config"]["codes_from"], json!(codes.display().to_string()));
+        // The encoder did not move: its codes (NAP's encoding) are the base prior's.
+        let all = read_index(&train).unwrap();
+        let id = all[0].id.clone();
+        let n = all.iter().filter(|p| p.id == id).count();
+        let (before, ..) = load_shape_dir(&base, &cpu()).unwrap();
+        let (after, ..) = load_shape_dir(&out, &cpu()).unwrap();
+        let nap = Encoding::default();
+        assert_eq!(
+            encode_object_parts(&before, &train, &id, n, short.surface_points, &nap).unwrap(),
+            encode_object_parts(&after, &train, &id, n, short.surface_points, &nap).unwrap()
+        );
+        // Each training part gets its own row, whatever order the run lists the parts in.
+        let book = read_codebook(&codes, short.model.latent).unwrap();
+        let f = short.model.latent;
+        let mut refs: Vec<&PartRef> = all.iter().filter(|p| p.split == "train").collect();
+        refs.reverse();
+        let fixed = FixedCodes::read(&codes, f, &refs).unwrap();
+        for (i, p) in refs.iter().enumerate() {
+            let r = all.iter().position(|q| q.id == p.id && q.k == p.k).unwrap();
+            assert_eq!(fixed.row(i), &book.codes[r * f..(r + 1) * f], "{}_{}", p.id, p.k);
+        }
+        // A training part missing from the codebook is named.
+        let mut index: Value =
+            serde_json::from_str(&std::fs::read_to_string(codes.join(CODEBOOK_INDEX_FILE)).unwrap())
+                .unwrap();
+        let key = format!("{}_{}", refs[0].id, refs[0].k);
+        let row = index["keys"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .position(|k| k["key"] == json!(key))
+            .unwrap();
+        index["keys"][row]["key"] = json!("elsewhere_0");
+        let broken = data.path().join("broken");
+        std::fs::create_dir_all(&broken).unwrap();
+        std::fs::write(broken.join(CODEBOOK_FILE), read(&codes, CODEBOOK_FILE)).unwrap();
+        std::fs::write(broken.join(CODEBOOK_INDEX_FILE), index.to_string()).unwrap();
+        let run_on = |dir: &Path, model: ShapePriorConfig| {
+            let cfg = ShapeTrainConfig {
+                codes_from: Some(dir.to_path_buf()),
+                model,
+                ..cfg.clone()
+            };
+            train_shape(&train, &cfg, &data.path().join("refused"), &mut |_| {})
+                .unwrap_err()
+                .to_string()
+        };
+        let e = run_on(&broken, short.model);
+        assert!(
+            e.contains(&key) && e.contains(CODEBOOK_INDEX_FILE) && e.contains("no code"),
+            "{e}"
+        );
+        // Codes of another width than the latent are refused with the file's name.
+        let e = run_on(
+            &codes,
+            ShapePriorConfig {
+                latent: f + 8,
+                ..short.model
+            },
+        );
+        assert!(e.contains(CODEBOOK_FILE) && e.contains(&format!("{f} dimensions")), "{e}");
+        // Without the frozen encoder the option is refused, naming both.
+        let cfg = ShapeTrainConfig {
+            freeze_encoder: false,
+            ..cfg.clone()
+        };
+        let e = cfg.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("codes_from") && e.contains("freeze_encoder") && e.contains("codes"),
             "{e}"
         );
     }
@@ -3440,6 +3685,7 @@ mod tests {
                 pts: pts.clone(),
                 tgt: tgt.clone(),
                 surf: surf.clone(),
+                codes: Vec::new(),
             };
             let run = |backward: DecoderBackward| {
                 let cfg = ShapeTrainConfig {
@@ -3560,7 +3806,7 @@ mod tests {
             };
             cfg.validate().unwrap();
             assert_eq!(cfg.near_queries(), near);
-            let batch = sample_batch(&parts, &[0, 0], &cfg, &mut Rng::new(1));
+            let batch = sample_batch(&parts, &[0, 0], &cfg, None, &mut Rng::new(1));
             assert_eq!(batch.tgt.len(), 128);
             assert_eq!(
                 batch.tgt.iter().filter(|&&t| t < 0.0).count(),

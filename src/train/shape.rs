@@ -2360,7 +2360,9 @@ fn run(
     };
     // What the run's evaluations encode the val parts by: the fixed codes' encoding, else
     // NAP's (the encoder's code).
-    let encoding = fixed.as_ref().map_or_else(Encoding::default, |f| f.encoding);
+    let encoding = fixed
+        .as_ref()
+        .map_or_else(Encoding::default, |f| f.encoding);
     let val_refs = val_selection(&all, cfg);
     let parts: Vec<PartSamples> = train
         .par_iter()
@@ -2877,7 +2879,10 @@ mod tests {
         let doc: Value =
             serde_json::from_str(&std::fs::read_to_string(out.join(REPORT_FILE)).unwrap()).unwrap();
         assert_eq!(Encoding::of_report(&doc, &out).unwrap(), fit);
-        assert_eq!(doc["config"]["codes_from"], json!(codes.display().to_string()));
+        assert_eq!(
+            doc["config"]["codes_from"],
+            json!(codes.display().to_string())
+        );
         // The encoder did not move: its codes (NAP's encoding) are the base prior's.
         let all = read_index(&train).unwrap();
         let id = all[0].id.clone();
@@ -2897,12 +2902,19 @@ mod tests {
         let fixed = FixedCodes::read(&codes, f, &refs).unwrap();
         for (i, p) in refs.iter().enumerate() {
             let r = all.iter().position(|q| q.id == p.id && q.k == p.k).unwrap();
-            assert_eq!(fixed.row(i), &book.codes[r * f..(r + 1) * f], "{}_{}", p.id, p.k);
+            assert_eq!(
+                fixed.row(i),
+                &book.codes[r * f..(r + 1) * f],
+                "{}_{}",
+                p.id,
+                p.k
+            );
         }
         // A training part missing from the codebook is named.
-        let mut index: Value =
-            serde_json::from_str(&std::fs::read_to_string(codes.join(CODEBOOK_INDEX_FILE)).unwrap())
-                .unwrap();
+        let mut index: Value = serde_json::from_str(
+            &std::fs::read_to_string(codes.join(CODEBOOK_INDEX_FILE)).unwrap(),
+        )
+        .unwrap();
         let key = format!("{}_{}", refs[0].id, refs[0].k);
         let row = index["keys"]
             .as_array()
@@ -2938,7 +2950,10 @@ mod tests {
                 ..short.model
             },
         );
-        assert!(e.contains(CODEBOOK_FILE) && e.contains(&format!("{f} dimensions")), "{e}");
+        assert!(
+            e.contains(CODEBOOK_FILE) && e.contains(&format!("{f} dimensions")),
+            "{e}"
+        );
         // Without the frozen encoder the option is refused, naming both.
         let cfg = ShapeTrainConfig {
             freeze_encoder: false,
@@ -2949,6 +2964,67 @@ mod tests {
             e.contains("codes_from") && e.contains("freeze_encoder") && e.contains("codes"),
             "{e}"
         );
+    }
+
+    /// A batch with fixed codes decodes those codes, not the encoder's: given the encoder's own
+    /// codes of its surface points, the loss is the loss without codes; other codes change it;
+    /// and the surface points no longer matter. Both backward passes take the same path.
+    #[test]
+    fn fixed_codes_replace_the_encoder_in_the_loss() {
+        let cfg = ShapeTrainConfig {
+            queries_per_part: 64,
+            surface_points: 32,
+            wrong_side: 10.0,
+            eikonal: 0.03,
+            ..tiny_config()
+        };
+        let device = crate::model::cpu_autodiff();
+        let model = ShapePrior::with_seed(&cfg.model, 5, &device);
+        let mut rng = Rng::new(6);
+        let mut draw = |n: usize, lo: f64, hi: f64| -> Vec<f32> {
+            (0..n).map(|_| rng.range(lo, hi) as f32).collect()
+        };
+        let b = 3;
+        let (pts, tgt) = (
+            draw(b * cfg.queries_per_part * 3, -0.5, 0.5),
+            draw(b * cfg.queries_per_part, -0.2, 0.2),
+        );
+        let (surf, other_surf) = (
+            draw(b * cfg.surface_points * 3, -0.5, 0.5),
+            draw(b * cfg.surface_points * 3, -0.5, 0.5),
+        );
+        let encoded = to_vec(model.encoder.encode(Tensor::from_data(
+            TensorData::new(surf.clone(), [b, cfg.surface_points, 3]),
+            &device,
+        )));
+        let shifted: Vec<f32> = encoded.iter().map(|c| c + 0.5).collect();
+        for backward in [DecoderBackward::Host, DecoderBackward::Burn] {
+            let cfg = ShapeTrainConfig {
+                decoder_backward: backward,
+                ..cfg.clone()
+            };
+            let loss = |surf: &[f32], codes: &[f32]| {
+                let batch = Batch {
+                    pts: pts.clone(),
+                    tgt: tgt.clone(),
+                    surf: surf.to_vec(),
+                    codes: codes.to_vec(),
+                };
+                batch_loss(&model, batch, &cfg, &device).1
+            };
+            let plain = loss(&surf, &[]);
+            let fixed = loss(&surf, &encoded);
+            assert!(
+                (plain - fixed).abs() <= 1e-6 * plain.abs(),
+                "{backward:?}: {plain} vs {fixed}"
+            );
+            assert_eq!(fixed, loss(&other_surf, &encoded), "{backward:?}");
+            let moved = loss(&surf, &shifted);
+            assert!(
+                (moved - fixed).abs() > 1e-4 * fixed.abs(),
+                "{backward:?}: {moved}"
+            );
+        }
     }
 
     /// `init_from` + `freeze_decoder` trains the encoder only: the decoder's field is the
@@ -3885,7 +3961,7 @@ mod tests {
                 decoder_backward: backward,
                 ..ShapeTrainConfig::default()
             };
-            let mut trainer = Trainer::new(&cfg, &parts).unwrap();
+            let mut trainer = Trainer::new(&cfg, &parts, None).unwrap();
             trainer.step(0).unwrap();
             let n = 10;
             let t0 = Instant::now();

@@ -9,7 +9,7 @@
 # seconds (of its last attempt; the train reports keep the cumulative training time); a rerun
 # with other knobs than OUT/recipe.knobs is refused, naming the knob. UNTIL=NAME stops after
 # that stage (a stage name of stages.tsv: synth, import, shape, decoderN, encode,
-# denoiser_stage1, denoiser_stage2, denoiser_decay, denoiser_restartN, eval_shape,
+# decoder_codes, denoiser_stage1, denoiser_stage2, denoiser_decay, denoiser_restartN, eval_shape,
 # eval_generative), to split the recipe over several sittings; it is not one of the knobs a
 # rerun must repeat.
 #
@@ -20,7 +20,9 @@
 # 0.03, cycle 3 seed 2 eikonal 0.03 with the wrong-side term --wrong-side 10, "ws10") -> train
 # encode: every part's code from the last cycle, the mean of 16 encoder views fitted 50 Adam
 # steps on 512 SDF samples with the decoder frozen (ENCODER_VIEWS, FIT_STEPS, FIT_QUERIES) ->
-# train diffusion on those codes (four runs: 2,000 steps at a constant learning rate, then
+# one more decoder cycle on exactly those codes (train shape --codes, encoder frozen, 3,000
+# steps, seed 3, eikonal 0.03, --wrong-side 10: the decoder learns to decode the codes the
+# denoiser learns, and they stay valid; CODES_DECODER_*) -> train diffusion on those codes (four runs: 2,000 steps at a constant learning rate, then
 # --resume with one cosine decay and a weight EMA to 14,000 steps in two runs, the second
 # (7,000 -> 14,000) with the box-overlap penalty --overlap-weight 3, then one more cosine cycle
 # (warm restart) to 18,000 steps with the penalty; the denoiser adds its category to every graph
@@ -74,7 +76,11 @@
 #   DECODER_WRONG_SIDE ("0 0 10": the --wrong-side weight of each cycle, one value per cycle;
 #   the third cycle's 10 raises the shape IoU 0.775 -> 0.812 by NAP's encoding, EVALUATION.md
 #   "ws10")
-#   DECODER_FLAGS ("": more flags for every decoder cycle)
+#   DECODER_FLAGS ("": more flags for every decoder cycle, the one on the codes too)
+#   CODES_DECODER_STEPS (3000; 0: none, the recipe before 2026-12-01)  CODES_DECODER_EIKONAL
+#   (0.03)  CODES_DECODER_WRONG_SIDE (10): the decoder cycle on the fitted codes after train
+#   encode (stage decoder_codes, train shape --codes): the shape IoU on the 64 val parts 0.857
+#   -> 0.880 on session 54's run (EVALUATION.md)
 #   ENCODER_VIEWS (16)  FIT_STEPS (50)  FIT_QUERIES (512): train encode's --encoder-views,
 #   --fit-steps and --fit-queries, how the codes the denoiser learns are made (as shipped since
 #   fcg2, shape IoU 0.860 on the 64 val parts; 1, 0, 2048: NAP's encoding, the weights before)
@@ -108,6 +114,9 @@ SHAPE_FLAGS=${SHAPE_FLAGS:-}
 DENOISER_FLAGS=${DENOISER_FLAGS:-}
 DECODER_STEPS=${DECODER_STEPS:-3000}
 DECODER_FLAGS=${DECODER_FLAGS:-}
+CODES_DECODER_STEPS=${CODES_DECODER_STEPS:-3000}
+CODES_DECODER_EIKONAL=${CODES_DECODER_EIKONAL:-0.03}
+CODES_DECODER_WRONG_SIDE=${CODES_DECODER_WRONG_SIDE:-10}
 DECODER_CYCLES=${DECODER_CYCLES:-3}
 DECODER_EIKONAL=${DECODER_EIKONAL-"0.01 0.03 0.03"}
 DECODER_WRONG_SIDE=${DECODER_WRONG_SIDE-"0 0 10"}
@@ -158,9 +167,9 @@ eikonal=()
 wrong_side=()
 per_cycle DECODER_EIKONAL "eikonal weight" eikonal
 per_cycle DECODER_WRONG_SIDE "wrong-side weight" wrong_side
-for knob in ENCODER_VIEWS FIT_STEPS FIT_QUERIES; do
+for knob in ENCODER_VIEWS FIT_STEPS FIT_QUERIES CODES_DECODER_STEPS; do
   if ! [[ "${!knob}" =~ ^[0-9]+$ ]]; then
-    echo "invalid $knob: need a whole number (train encode checks its range), got '${!knob}'" >&2
+    echo "invalid $knob: need a whole number (train encode and train shape check its range), got '${!knob}'" >&2
     exit 2
   fi
 done
@@ -170,14 +179,20 @@ for knob in DENOISER_SHARDS RESTART_SHARDS SHAPE_SHARDS; do
     exit 2
   fi
 done
+for knob in CODES_DECODER_EIKONAL CODES_DECODER_WRONG_SIDE; do
+  if ! [[ "${!knob}" =~ ^[0-9]*\.?[0-9]+$ ]]; then
+    echo "invalid $knob: need a non-negative number (train shape checks its range), got '${!knob}'" >&2
+    exit 2
+  fi
+done
 for knob in LAYOUT_GAIN CODE_GAIN; do
   if ! [[ "${!knob}" =~ ^[0-9]*\.?[0-9]+$ ]]; then
     echo "invalid $knob: need a positive number (train diffusion checks its range), got '${!knob}'" >&2
     exit 2
   fi
 done
-if [ -n "$UNTIL" ] && ! [[ "$UNTIL" =~ ^(synth|import|shape|decoder[0-9]+|encode|denoiser_(stage1|stage2|decay|restart[0-9]+)|eval_shape|eval_generative)$ ]]; then
-  echo "invalid UNTIL: need a stage name (synth, import, shape, decoderN, encode, denoiser_stage1, denoiser_stage2, denoiser_decay, denoiser_restartN, eval_shape, eval_generative), got '$UNTIL'" >&2
+if [ -n "$UNTIL" ] && ! [[ "$UNTIL" =~ ^(synth|import|shape|decoder[0-9]+|encode|decoder_codes|denoiser_(stage1|stage2|decay|restart[0-9]+)|eval_shape|eval_generative)$ ]]; then
+  echo "invalid UNTIL: need a stage name (synth, import, shape, decoderN, encode, decoder_codes, denoiser_stage1, denoiser_stage2, denoiser_decay, denoiser_restartN, eval_shape, eval_generative), got '$UNTIL'" >&2
   exit 2
 fi
 if [ "$SHAPE_BACKWARD" != burn ] && [ "$SHAPE_BACKWARD" != host ]; then
@@ -229,7 +244,8 @@ knobs=(OBJECTS SHAPE_STEPS STAGE1 STAGE2 STEPS BATCH_OBJECTS CHECKPOINT_EVERY IM
        SHAPE_FLAGS DENOISER_FLAGS DECODER_STEPS DECODER_FLAGS DECODER_CYCLES DECODER_EIKONAL
        DECODER_WRONG_SIDE SHAPE_BATCH SHAPE_BACKWARD DENOISER_SHARDS RESTART_STEPS
        RESTART_OVERLAP RESTART_SHARDS DECAY_OVERLAP SHAPE_SHARDS ENCODER_VIEWS FIT_STEPS
-       FIT_QUERIES LAYOUT_GAIN CODE_GAIN)
+       FIT_QUERIES LAYOUT_GAIN CODE_GAIN CODES_DECODER_STEPS CODES_DECODER_EIKONAL
+       CODES_DECODER_WRONG_SIDE)
 if [ -f "$OUT/recipe.knobs" ]; then
   while IFS= read -r line; do
     k=${line%%=*}
@@ -309,7 +325,22 @@ fi
 # encoding and the runs the prior continued, which the manifest keeps).
 run encode train encode --weights "$last" --data "$OUT/train" --out "$OUT/codes" \
   --encoder-views "$ENCODER_VIEWS" --fit-steps "$FIT_STEPS" --fit-queries "$FIT_QUERIES"
-common=(--data "$OUT/train" --shape "$OUT/codes" --out "$OUT/weights"
+# One more decoder cycle, on exactly those codes (train shape --codes; the encoder, which the
+# fitting started from, frozen): the cycles above trained the decoder on the encoder's one-view
+# codes, while the denoiser generates, and eval shape measures, the fitted ones. The codes do
+# not change, so the denoiser below learns the same codes either way; its --shape directory
+# then holds this decoder and a copy of the codes. One evaluation at the end (--eval-every 0).
+shape="$OUT/codes"
+if [ "$CODES_DECODER_STEPS" != 0 ]; then
+  # shellcheck disable=SC2086,SC2046
+  run decoder_codes train shape --data "$OUT/train" --out "$OUT/shape_codes" --steps "$CODES_DECODER_STEPS" \
+    --seed "$DECODER_CYCLES" --init-from "$last" --freeze-encoder --codes "$OUT/codes" --lr 5e-4 \
+    --eikonal "$CODES_DECODER_EIKONAL" --wrong-side "$CODES_DECODER_WRONG_SIDE" --eval-every 0 \
+    --batch-shards "$SHAPE_SHARDS" $SHAPE_BATCH $SHAPE_FLAGS $DECODER_FLAGS \
+    $(resume_shape "$OUT/shape_codes")
+  shape="$OUT/shape_codes"
+fi
+common=(--data "$OUT/train" --shape "$shape" --out "$OUT/weights"
         --batch-objects "$BATCH_OBJECTS" --noise-levels 4 --lr 5e-4
         --checkpoint-every "$CHECKPOINT_EVERY" --category-layers --layout-gain "$LAYOUT_GAIN"
         --code-gain "$CODE_GAIN")

@@ -443,12 +443,15 @@ pub fn diffusion(a: DiffusionArgs) -> anyhow::Result<()> {
         data: serde_json::json!({ "dataset": a.data.display().to_string(), "synth": read(&a.data.join("../synth/synth.json")) }),
         training: {
             // `train encode` records the runs its prior continued under "lineage"; the
-            // manifest keeps them beside it, as `install-shape` does.
+            // manifest keeps them beside it, as `install-shape` does. A `train shape`
+            // directory (a decoder cycle on the codes, `--codes`) is followed back through
+            // the runs it started from.
             let mut shape = read(&a.shape.join("shape_train.json"));
-            let lineage = shape
-                .as_object_mut()
-                .and_then(|o| o.remove("lineage"))
-                .unwrap_or_default();
+            let lineage = match shape.as_object_mut().and_then(|o| o.remove("lineage")) {
+                Some(l) => l,
+                None if shape.is_object() => lineage(&a.shape, &shape)?,
+                None => serde_json::Value::Null,
+            };
             let mut t = serde_json::json!({
                 "shape": shape,
                 "diffusion": read(&a.out.join("diffusion_train.json")),

@@ -1087,6 +1087,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             .env("SHAPE_FLAGS", toy_shape[4..].join(" "))
             .env("DENOISER_FLAGS", "--width 32 --layers 1")
             .env("DECODER_STEPS", "2")
+            .env("CODES_DECODER_STEPS", "2")
             .env("EVAL", "0")
             .envs(extra.iter().copied())
             .output()
@@ -1165,7 +1166,19 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         m["training"]["shape"]["config"]["freeze_encoder"], true,
         "{m:#}"
     );
-    assert_eq!(m["training"]["shape"]["config"]["seed"], 2, "{m:#}");
+    // The shipped prior is the last cycle's decoder trained on exactly those codes (stage
+    // decoder_codes, seed 3): its report keeps the encoding above and where the codes came
+    // from, and the denoiser's --shape directory is that cycle's.
+    assert_eq!(m["training"]["shape"]["config"]["seed"], 3, "{m:#}");
+    assert_eq!(
+        m["training"]["shape"]["config"]["codes_from"],
+        serde_json::json!(out.join("codes").display().to_string()),
+        "{m:#}"
+    );
+    assert!(
+        err.contains(&format!("--shape {}/shape_codes ", s(&out))),
+        "{err}"
+    );
     assert_eq!(m["training"]["shape_base"]["steps"], 4, "{m:#}");
     assert_eq!(
         m["training"]["shape_base"]["config"]["freeze_encoder"], false,
@@ -1197,7 +1210,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     assert_eq!(diffusion_runs_with(&err, "--code-gain 2"), 5, "{err}");
     assert_eq!(m["training"]["diffusion"]["code_gain"], 2.0, "{m:#}");
     let cycles = m["training"]["shape_cycles"].as_array().unwrap();
-    assert_eq!(cycles.len(), 2, "{m:#}");
+    assert_eq!(cycles.len(), 3, "{m:#}");
     for (i, c) in cycles.iter().enumerate() {
         assert_eq!(c["config"]["seed"], i, "{m:#}");
         assert_eq!(c["config"]["freeze_encoder"], true, "{m:#}");
@@ -1208,6 +1221,8 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     assert_eq!(cycles[0]["config"]["eikonal"], 0.01, "{m:#}");
     assert_eq!(cycles[1]["config"]["eikonal"], 0.03, "{m:#}");
     assert_eq!(cycles[1]["config"]["wrong_side"], 0.0, "{m:#}");
+    assert_eq!(cycles[2]["config"]["wrong_side"], 10.0, "{m:#}");
+    assert!(cycles[2]["config"]["codes_from"].is_null(), "{m:#}");
     assert_eq!(m["training"]["shape"]["config"]["eikonal"], 0.03, "{m:#}");
     assert_eq!(
         m["training"]["shape"]["config"]["wrong_side"], 10.0,
@@ -1218,7 +1233,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     // theirs (the recipe's time budget), the last builds it (above).
     assert_eq!(err.matches("--no-codebook").count(), 4, "{err}");
     // Every stage is timed in stages.tsv (name, wall seconds, command): data 2, prior 1, three
-    // cycles, the encoding and the five denoiser runs.
+    // cycles, the encoding, the cycle on the codes and the five denoiser runs.
     let tsv = std::fs::read_to_string(out.join("stages.tsv")).unwrap();
     let stages: Vec<&str> = tsv.lines().map(|l| l.split('\t').next().unwrap()).collect();
     assert_eq!(
@@ -1231,6 +1246,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
             "decoder2",
             "decoder3",
             "encode",
+            "decoder_codes",
             "denoiser_stage1",
             "denoiser_stage2",
             "denoiser_decay",
@@ -1246,7 +1262,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     assert!(!err.contains("+ physnap"), "{err}");
-    assert_eq!(err.matches("done before, skipped").count(), 12, "{err}");
+    assert_eq!(err.matches("done before, skipped").count(), 13, "{err}");
     assert_eq!(
         std::fs::read(w.join("manifest.json")).unwrap(),
         manifest_bytes
@@ -1324,7 +1340,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     );
     assert!(!err.contains("+ physnap"), "{err}");
     // A cycle trained on the weights directory itself: `train encode` of it follows its start
-    // into the manifest and keeps that history (the first prior, then the three cycles).
+    // into the manifest and keeps that history (the first prior, the three cycles, then the one on the codes).
     let c3 = out.join("cycle_on_weights");
     toy_cycle(&c3, &["--steps", "1", "--init-from", s(&w)]);
     let codes3 = out.join("codes3");
@@ -1348,7 +1364,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         .collect();
     assert_eq!(
         seeds,
-        [0, 1, 2].map(|i| serde_json::json!(i)),
+        [0, 1, 2, 3].map(|i| serde_json::json!(i)),
         "{lineage:#}"
     );
     // Installing without one drops the stale codebook, file and manifest entry, and says how
@@ -1403,6 +1419,11 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         (&[("ENCODER_VIEWS", "-2")][..], "ENCODER_VIEWS"),
         (&[("LAYOUT_GAIN", "twice")][..], "LAYOUT_GAIN"),
         (&[("CODE_GAIN", "double")][..], "CODE_GAIN"),
+        (&[("CODES_DECODER_STEPS", "all")][..], "CODES_DECODER_STEPS"),
+        (
+            &[("CODES_DECODER_WRONG_SIDE", "-3")][..],
+            "CODES_DECODER_WRONG_SIDE",
+        ),
         (&[("UNTIL", "denoiser")][..], "UNTIL"),
     ] {
         let o = Command::new("bash")
@@ -1426,14 +1447,16 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     // first prior with burn's autodiff (SHAPE_BACKWARD=burn), the single-pass steps of the
     // weights shipped before (DENOISER_SHARDS=1, SHAPE_SHARDS=1), one decoder cycle without
     // the eikonal term and with the wrong-side term (DECODER_WRONG_SIDE=10), NAP's feature
-    // scales for the layout and the codes (LAYOUT_GAIN=1, CODE_GAIN=1: the weights before lg2)
-    // and a small fitted encoding.
+    // scales for the layout and the codes (LAYOUT_GAIN=1, CODE_GAIN=1: the weights before lg2),
+    // a small fitted encoding and no cycle on the codes (CODES_DECODER_STEPS=0: the recipe
+    // before 2026-12-01).
     let two = root.path().join("two");
     let o = repro(
         &two,
         ["2", "0", "4"],
         &[
             ("RESTART_STEPS", "0"),
+            ("CODES_DECODER_STEPS", "0"),
             ("SHAPE_BACKWARD", "burn"),
             ("DENOISER_SHARDS", "1"),
             ("DECODER_CYCLES", "1"),

@@ -293,6 +293,23 @@ pub fn install_shape(a: InstallShapeArgs) -> anyhow::Result<()> {
             report_path.display()
         )
     })?;
+    // Fitted codes (the encoding's fitting steps) were fitted to the installed decoder: another
+    // decoder decodes them into other shapes unless it was trained on them (`train shape
+    // --codes`, whose report keeps their encoding). Codes from the encoder alone stay valid
+    // under any decoder that keeps the encoder.
+    let installed_enc = Encoding::of_report(&manifest.training["shape"], &path)?;
+    let new_enc = Encoding::of_report(&report, &report_path)?;
+    if installed_enc.fit_steps > 0
+        && (report["config"]["codes_from"].is_null() || new_enc != installed_enc)
+    {
+        bail!(
+            "{}: the installed codes were fitted {} steps to the installed decoder (training.shape.encoding in {}), so a decoder not trained on them decodes them into other shapes; train it on those codes (train shape --init-from {} --freeze-encoder --codes DIR, DIR the train encode output the denoiser learned), or train a new denoiser",
+            report_path.display(),
+            installed_enc.fit_steps,
+            path.display(),
+            a.weights.display()
+        );
+    }
     let candidate = a.shape.join("shape_prior.safetensors");
     let device = physnap::model::cpu();
     let old = load_shape_prior(&installed, &installed_cfg, &device)?;

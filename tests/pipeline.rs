@@ -1367,21 +1367,47 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         [0, 1, 2, 3].map(|i| serde_json::json!(i)),
         "{lineage:#}"
     );
-    // Installing without one drops the stale codebook, file and manifest entry, and says how
-    // to build it; `train codebook` puts it back.
-    let said = ok(&[
-        "train",
-        "install-shape",
-        "--shape",
-        s(&d3),
-        "--weights",
-        s(&w),
-        "--no-codebook",
-    ]);
+    // The codes the denoiser learned were fitted to the decoder: one not trained on them (the
+    // third cycle) is refused, naming the fitting and the way out; the cycle trained on them
+    // installs. Installing without a codebook drops the stale one, file and manifest entry,
+    // and says how to build it; `train codebook` puts it back.
+    let install = |shape: &Path| {
+        physnap(&[
+            "train",
+            "install-shape",
+            "--shape",
+            s(shape),
+            "--weights",
+            s(&w),
+            "--no-codebook",
+        ])
+    };
+    let o = install(&d3);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{e}");
+    assert!(
+        e.contains("fitted 50 steps") && e.contains("--codes") && e.contains("shape_decoder3"),
+        "{e}"
+    );
+    assert!(
+        w.join("codebook.safetensors").exists(),
+        "refused: nothing changed"
+    );
+    let codes_cycle = out.join("shape_codes");
+    let o = install(&codes_cycle);
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(said.contains("physnap train codebook"), "{said}");
     assert!(!w.join("codebook.safetensors").exists());
     assert!(read(&w.join("manifest.json"))["codebook"].is_null());
-    ok(&["train", "codebook", "--shape", s(&d3), "--weights", s(&w)]);
+    ok(&[
+        "train",
+        "codebook",
+        "--shape",
+        s(&codes_cycle),
+        "--weights",
+        s(&w),
+    ]);
     assert!(
         read(&w.join("manifest.json"))["codebook"]["config"]["rows"]
             .as_u64()

@@ -18,6 +18,9 @@
 //!   (forward differences, [`EIKONAL_STEP`]; off by default), optionally plus the wrong-side
 //!   term w_ws · mean relu(−f̂ · sign f), which weighs the queries on the wrong side of the
 //!   surface 1 + w_ws times (off by default);
+//! - with `codes_from` (a decoder cycle on fixed codes, encoder frozen) z is each part's row of
+//!   a given codebook instead of the encoder's code of its surface points — the fitted codes a
+//!   denoiser learns, which then stay valid — and the run's codebook is a copy of that one;
 //! - Adam with a cosine decay from `lr` to `lr · lr_final_factor`;
 //! - every `eval_every` steps and at the end: mean IoU of `SDF < 0` against ground truth on a
 //!   `iou_resolution`³ grid of cell centres over [−0.55, 0.55]³, codes encoded from each val

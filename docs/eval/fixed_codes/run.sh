@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # A decoder cycle on the fixed, fitted codes the denoiser learns (train shape --codes), on the
-# outputs of session 54's one-go recipe (R): the decoder of its third cycle (ws10) fine-tuned
-# on R/codes (16 views, 50 fitting steps on 512 samples), the encoder frozen, so R's denoiser
-# stays valid. Then the shape IoU on the 64 val parts and on all 940, and the recipe's weights
-# with only the shape prior swapped ("swap"), for the category check (cat.sh).
+# outputs of session 54's one-go recipe (R): the decoder of its third cycle (ws10) trained 3,000
+# steps on R/codes (16 views, 50 fitting steps on 512 samples) with the encoder frozen, so R's
+# denoiser stays valid; then the shape IoU on the manifest's 64 val parts. (Session 55 started
+# the 940-part evaluation too and stopped it to free the cores for fcg2.sh, the shippable run.)
 # Usage: W=10 STEPS=3000 bash run.sh      (BIN: a physnap built with train shape --codes)
 set -euo pipefail
 BIN=${BIN:-/work/bin/physnap-codes}
@@ -20,17 +20,6 @@ export MIMALLOC_PURGE_DELAY=-1
   --eikonal "$EIK" --wrong-side "$W" --batch-shards 2 \
   --batch-parts 128 --queries-per-part 128 --surface-points 64 --eval-every 0 --val-parts 64 \
   > "$X/$name.train.log" 2>&1
-"$BIN" eval shape --weights "$X/$name" --data "$R/train" --parts 940 --out "$X/${name}_val940.json" \
-  > "$X/$name.eval.log" 2>&1
-# The recipe's weights with the new shape prior; the manifest's sha256 of that file updated.
-sw="$X/${name}_weights"
-rm -rf "$sw" && cp -r "$R/weights" "$sw" && rm -f "$sw/eval_generative.json"
-cp "$X/$name/shape_prior.safetensors" "$sw/shape_prior.safetensors"
-python3 - "$sw" <<'PY'
-import hashlib, json, sys
-d = sys.argv[1]
-m = json.load(open(f"{d}/manifest.json"))
-m["shape_prior"]["sha256"] = hashlib.sha256(open(f"{d}/shape_prior.safetensors", "rb").read()).hexdigest()
-open(f"{d}/manifest.json", "w").write(json.dumps(m, indent=2))
-PY
+"$BIN" eval shape --weights "$X/$name" --data "$R/train" --parts 64 --out "$X/A_val64.json" \
+  > "$X/A_val64.log" 2>&1
 echo "done $name"

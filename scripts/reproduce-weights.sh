@@ -29,18 +29,20 @@
 # layer, --category-layers, and trains the part layout and the shape codes at twice NAP's
 # feature scale, --layout-gain 2 --code-gain 2; each step's batch in two slices; the last run
 # builds the retrieval codebook) -> eval shape and eval generative --write-manifest.
-# OUT/weights is then a drop-in replacement for weights/ (the weights shipped since 2026-11-30,
-# fifty-first session, "fcg2"; weights/README.md "How they were made"). The shipped files were
+# OUT/weights is then a drop-in replacement for weights/ (the weights shipped since 2026-12-01,
+# fifty-fifth session, "fcg2dc"; weights/README.md "How they were made"). The shipped files were
 # trained stage by stage with these commands, not by one run of this script: the first prior
 # and its first two cycles before --batch-shards existed, with the single pass (SHAPE_SHARDS=1:
 # the same loss up to float rounding, 1.33x / 1.18x slower per step), the codes with ws10 as it
-# was rebuilt in session 45. Until 2026-11-29 (forty-sixth session) the recipe trained the
+# was rebuilt in session 45, the cycle on the codes (decoder_codes) after the denoiser, which
+# does not read the decoder (docs/eval/fixed_codes/). Until 2026-11-29 (forty-sixth session) the recipe trained the
 # denoiser before the decoder cycles and installed them with train install-shape; with NAP's
 # encoding both orders give the same codes and weights.
-# Run in one go from scratch on 2 cores (2026-11-30, fifty-fourth session): 9,561 s = 2 h 39 min
-# from synth to the last denoiser run, plus 577 s of evaluations (BENCHMARKS.md "The recipe in
-# one go", docs/eval/one_go_s54/stages.tsv). Inside the issue's 3-hour budget; ≈ 2 h 47 min at
-# the slower pace the same machine had in session 52.
+# Run in one go from scratch on 2 cores (2026-11-30, fifty-fourth session, before the stage
+# decoder_codes existed): 9,561 s = 2 h 39 min from synth to the last denoiser run, plus 577 s of
+# evaluations (BENCHMARKS.md "The recipe in one go", docs/eval/one_go_s54/stages.tsv); the cycle
+# on the codes adds ≈ 470 s (measured alone), ≈ 2 h 47 min in all, ≈ 2 h 55 min at the slower
+# pace the same machine had in session 52: inside the issue's 3-hour budget.
 #
 # Knobs (environment; the defaults are the shipped recipe, smaller values make a smoke run):
 #   PHYSNAP_BIN   physnap binary (default: cargo build --release, then target/release/physnap)
@@ -79,8 +81,9 @@
 #   DECODER_FLAGS ("": more flags for every decoder cycle, the one on the codes too)
 #   CODES_DECODER_STEPS (3000; 0: none, the recipe before 2026-12-01)  CODES_DECODER_EIKONAL
 #   (0.03)  CODES_DECODER_WRONG_SIDE (10): the decoder cycle on the fitted codes after train
-#   encode (stage decoder_codes, train shape --codes): the shape IoU on the 64 val parts 0.857
-#   -> 0.880 on session 54's run (EVALUATION.md)
+#   encode (stage decoder_codes, train shape --codes): shape IoU on all 940 val parts 0.843 ->
+#   0.865 on fcg2, on the 64 val parts 0.857 -> 0.880 on session 54's run
+#   (docs/eval/fixed_codes/)
 #   ENCODER_VIEWS (16)  FIT_STEPS (50)  FIT_QUERIES (512): train encode's --encoder-views,
 #   --fit-steps and --fit-queries, how the codes the denoiser learns are made (as shipped since
 #   fcg2, shape IoU 0.860 on the 64 val parts; 1, 0, 2048: NAP's encoding, the weights before)

@@ -6,9 +6,11 @@ codebook), and the manifest `install-shape`, `eval shape --write-manifest` and `
 metrics.generative_seeds (metrics.generative stays the seed-12345 run --write-manifest wrote)
 and the whole-split shape IoU under metrics.shape_whole_split. The manifest shipped before
 (fcg2) is kept as docs/eval/fixed_codes/previous_manifest.json. Run from the repository root:
-    python3 docs/eval/fixed_codes/ship.py CANDIDATE_WEIGHTS_DIR RESULTS_DIR"""
+    python3 docs/eval/fixed_codes/ship.py CANDIDATE_WEIGHTS_DIR RESULTS_DIR [SEED ...]
+(default seeds 12345 1 2 3 4 5; session 55 shipped with those, then reran it with 6 7 8 added)."""
 import hashlib
 import json
+import os
 import shutil
 import sys
 
@@ -69,7 +71,9 @@ m['metrics']['shape_whole_split'] = {
     'file': D + 'fcg2dc_val940.json',
     'target': 0.85,
 }
-shutil.copyfile('weights/manifest.json', D + 'previous_manifest.json')
+# A rerun (more seeds) keeps the manifest shipped before, the one it first replaced.
+if not os.path.exists(D + 'previous_manifest.json'):
+    shutil.copyfile('weights/manifest.json', D + 'previous_manifest.json')
 for f in FILES.values():
     shutil.copyfile(f'{src}/{f}', f'weights/{f}')
 shutil.copyfile(f'{src}/eval_generative.json', 'weights/eval_generative.json')

@@ -867,6 +867,9 @@ struct FixedCodes {
     codes: Vec<f32>,
     latent: usize,
     encoding: Encoding,
+    /// The codebook directory, and its number of rows (every part of every split).
+    dir: PathBuf,
+    rows: usize,
 }
 
 impl FixedCodes {
@@ -880,11 +883,7 @@ impl FixedCodes {
     fn read(dir: &Path, latent: usize, train: &[&PartRef]) -> Result<FixedCodes, TrainError> {
         let book = read_codebook(dir, latent)?;
         let index_path = dir.join(CODEBOOK_INDEX_FILE);
-        let index: Value = serde_json::from_str(
-            &std::fs::read_to_string(&index_path).map_err(TrainError::io(&index_path))?,
-        )
-        .map_err(|e| TrainError::data(&index_path, e.to_string()))?;
-        let encoding = Encoding::of_report(&index, &index_path)?;
+        let encoding = Encoding::of_report(&json!({ "encoding": book.encoding }), &index_path)?;
         let rows: std::collections::HashMap<&str, usize> = book
             .keys
             .iter()
@@ -909,7 +908,22 @@ impl FixedCodes {
             codes,
             latent,
             encoding,
+            dir: dir.to_path_buf(),
+            rows: book.keys.len(),
         })
+    }
+
+    /// Copy the codebook, byte for byte, into `out` (the run's codebook: the codes its decoder
+    /// was trained on); returns its number of rows.
+    fn copy_to(&self, out: &Path) -> Result<usize, TrainError> {
+        for file in [CODEBOOK_FILE, CODEBOOK_INDEX_FILE] {
+            let (src, dst) = (self.dir.join(file), out.join(file));
+            if src != dst {
+                let bytes = std::fs::read(&src).map_err(TrainError::io(&src))?;
+                write_atomic(&dst, &bytes)?;
+            }
+        }
+        Ok(self.rows)
     }
 }
 
@@ -1622,6 +1636,8 @@ pub struct CodebookFile {
     pub codes: Vec<f32>,
     /// One `{"key", "object", "part", "split"}` entry per row.
     pub keys: Vec<serde_json::Value>,
+    /// The index's `"encoding"` entry (null for NAP's; [`Encoding::of_report`] reads it).
+    pub encoding: serde_json::Value,
 }
 
 /// Read `shape/codebook.npy` + `shape/codebook.json`; refuses codes that are not `latent` wide
@@ -1650,7 +1666,12 @@ pub fn read_codebook(shape: &Path, latent: usize) -> Result<CodebookFile, TrainE
             format!("{} keys for {rows} codes", keys.len()),
         ));
     }
-    Ok(CodebookFile { cols, codes, keys })
+    Ok(CodebookFile {
+        cols,
+        codes,
+        keys,
+        encoding: index["encoding"].clone(),
+    })
 }
 
 /// Encode every part of the data set (dataset order) by `enc` ([`Encoding`]); writes
@@ -2489,18 +2510,8 @@ fn run(
 
     let model = trainer.inference_model();
     save_shape_prior(&model, &out.join(WEIGHTS_FILE))?;
-    let codebook_rows = match &cfg.codes_from {
-        // The codes the decoder was trained on are the run's codebook, byte for byte.
-        Some(dir) => {
-            for file in [CODEBOOK_FILE, CODEBOOK_INDEX_FILE] {
-                let (src, dst) = (dir.join(file), out.join(file));
-                if src != dst {
-                    let bytes = std::fs::read(&src).map_err(TrainError::io(&src))?;
-                    write_atomic(&dst, &bytes)?;
-                }
-            }
-            read_codebook(out, cfg.model.latent)?.keys.len()
-        }
+    let codebook_rows = match &fixed {
+        Some(f) => f.copy_to(out)?,
         None => write_codebook(
             &model,
             data,

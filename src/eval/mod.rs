@@ -7,3 +7,4 @@
 
 pub mod generative;
 pub mod guided;
+pub mod shape_iou;

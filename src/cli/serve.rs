@@ -9,12 +9,12 @@ use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpStream};
 use std::path::PathBuf;
 use std::time::Duration;
-
 use anyhow::Context;
 use clap::Args;
-
 use physnap::service::auth::Tenants;
 use physnap::service::server::{ServeConfig, Server};
+
+
 
 #[derive(Args, Debug)]
 pub struct ServeArgs {

@@ -3,21 +3,124 @@
 //! The work itself lives in `physnap::data`; this module only wires flags to it and prints
 //! what happened (histograms, skip reasons, output paths).
 
-use std::path::Path;
-
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
 use anyhow::{Context, bail};
-
+use clap::{Args, Parser, Subcommand};
 use physnap::data::categories::{SYNTH_CATEGORIES, canonical_name};
 use physnap::data::dataset::{ImportOptions, import_dir, load_object_meshes};
 use physnap::data::generate::{SynthOptions, synthesize};
 use physnap::data::partnet::read_object;
 use physnap::data::rng::Rng;
 use physnap::data::scan::{ScanOptions, scan as scan_object};
+use physnap::export::{ExportOptions, export_dir, mesh_parts};
+use physnap::mesh::MeshingOptions;
 use physnap::pointcloud::{Format, PointCloud, write_coloured_ply};
 
-use super::{ImportArgs, ScanArgs, SynthArgs, TestsetArgs};
 
-pub fn synth(a: SynthArgs) -> anyhow::Result<()> {
+#[derive(Subcommand, Debug)]
+pub(crate) enum DataCommand {
+    /// Generate procedural articulated objects in the PartNet-Mobility layout.
+    Synth(SynthArgs),
+    /// Build the training set (graph records, part meshes, SDF samples, splits) from a
+    /// folder of PartNet-Mobility-layout objects (real or synthetic).
+    Import(ImportArgs),
+    /// Render one partial point-cloud scan of an object folder (PartNet-Mobility layout).
+    Scan(ScanArgs),
+    /// Make a test set: COUNT objects of a split of an imported data set, one scan each.
+    Testset(TestsetArgs),
+}
+
+/// Runs one `physnap data …` subcommand.
+pub(crate) fn run(command: DataCommand) -> anyhow::Result<()> {
+    match command {
+        DataCommand::Synth(a) => synth(a),
+        DataCommand::Import(a) => import(a),
+        DataCommand::Scan(a) => scan(a),
+        DataCommand::Testset(a) => testset(a),
+    }
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct SynthArgs {
+    /// Output directory (one folder per object, plus synth.json).
+    #[arg(long, env = "PHYSNAP_OUT")]
+    pub(crate) out: PathBuf,
+    /// Number of objects.
+    #[arg(long, env = "PHYSNAP_SYNTH_OBJECTS", default_value_t = 1000)]
+    pub(crate) objects: usize,
+    /// Random seed; the same seed gives byte-identical output.
+    #[arg(long, env = "PHYSNAP_SEED", default_value_t = 0)]
+    pub(crate) seed: u64,
+    /// Comma-separated categories (default: all the generator supports).
+    #[arg(long, env = "PHYSNAP_SYNTH_CATEGORIES", value_delimiter = ',')]
+    pub(crate) categories: Vec<String>,
+    /// Draws per object before giving up on it.
+    #[arg(long, env = "PHYSNAP_SYNTH_MAX_ATTEMPTS", default_value_t = 200)]
+    pub(crate) max_attempts: usize,
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct ImportArgs {
+    /// Folder of PartNet-Mobility-layout object folders.
+    #[arg(long = "partnet-mobility", env = "PHYSNAP_PARTNET_MOBILITY")]
+    pub(crate) src: PathBuf,
+    /// Output directory for the training set.
+    #[arg(long, env = "PHYSNAP_OUT")]
+    pub(crate) out: PathBuf,
+    /// Seed for SDF sampling and splits.
+    #[arg(long, env = "PHYSNAP_SEED", default_value_t = 0)]
+    pub(crate) seed: u64,
+    /// Uniform SDF samples per part.
+    #[arg(long, env = "PHYSNAP_IMPORT_UNIFORM", default_value_t = 4096)]
+    pub(crate) uniform: usize,
+    /// Near-surface SDF samples per part.
+    #[arg(long, env = "PHYSNAP_IMPORT_NEAR", default_value_t = 4096)]
+    pub(crate) near: usize,
+    /// Surface points per part (shape-encoder input).
+    #[arg(long, env = "PHYSNAP_IMPORT_SURFACE", default_value_t = 1024)]
+    pub(crate) surface: usize,
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct ScanArgs {
+    /// Object folder (PartNet-Mobility layout, e.g. one written by `data synth`).
+    #[arg(long, env = "PHYSNAP_SCAN_OBJECT")]
+    pub(crate) object: PathBuf,
+    /// Output point cloud: .ply, .npy or .json.
+    #[arg(long, env = "PHYSNAP_OUT")]
+    pub(crate) out: PathBuf,
+    /// Random seed (camera pose and pixels).
+    #[arg(long, env = "PHYSNAP_SEED", default_value_t = 0)]
+    pub(crate) seed: u64,
+    /// Points per scan.
+    #[arg(long, env = "PHYSNAP_SCAN_POINTS", default_value_t = 1000)]
+    pub(crate) points: usize,
+    /// Also write a coloured PLY with the object's surface (grey) and the scan (red).
+    #[arg(long, env = "PHYSNAP_SCAN_PREVIEW")]
+    pub(crate) preview: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct TestsetArgs {
+    /// Imported data set (output of `data import`).
+    #[arg(long, env = "PHYSNAP_DATA")]
+    pub(crate) data: PathBuf,
+    /// Output directory: <id>.ply per object plus testset.json.
+    #[arg(long, env = "PHYSNAP_OUT")]
+    pub(crate) out: PathBuf,
+    /// Number of objects (the paper uses 30).
+    #[arg(long, env = "PHYSNAP_TESTSET_COUNT", default_value_t = 30)]
+    pub(crate) count: usize,
+    /// Split to draw from.
+    #[arg(long, env = "PHYSNAP_TESTSET_SPLIT", default_value = "test")]
+    pub(crate) split: String,
+    /// Random seed (object choice, camera poses).
+    #[arg(long, env = "PHYSNAP_SEED", default_value_t = 0)]
+    pub(crate) seed: u64,
+}
+
+pub(crate) fn synth(a: SynthArgs) -> anyhow::Result<()> {
     let categories: Vec<String> = if a.categories.is_empty() {
         SYNTH_CATEGORIES.iter().map(|s| s.to_string()).collect()
     } else {
@@ -77,7 +180,7 @@ pub fn synth(a: SynthArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-pub fn import(a: ImportArgs) -> anyhow::Result<()> {
+pub(crate) fn import(a: ImportArgs) -> anyhow::Result<()> {
     let total = physnap::data::dataset::object_dirs(&a.src)
         .with_context(|| format!("listing {}", a.src.display()))?
         .len();
@@ -118,7 +221,7 @@ pub fn import(a: ImportArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn write_cloud(points: Vec<[f32; 3]>, out: &Path) -> anyhow::Result<()> {
+pub(crate) fn write_cloud(points: Vec<[f32; 3]>, out: &Path) -> anyhow::Result<()> {
     let format = Format::from_path(out).with_context(|| {
         format!(
             "invalid --out {}: extension must be .ply, .npy or .json",
@@ -129,7 +232,7 @@ fn write_cloud(points: Vec<[f32; 3]>, out: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
-pub fn scan(a: ScanArgs) -> anyhow::Result<()> {
+pub(crate) fn scan(a: ScanArgs) -> anyhow::Result<()> {
     let obj = read_object(&a.object).with_context(|| format!("reading {}", a.object.display()))?;
     let opts = ScanOptions {
         points: a.points,
@@ -164,7 +267,7 @@ pub fn scan(a: ScanArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-pub fn testset(a: TestsetArgs) -> anyhow::Result<()> {
+pub(crate) fn testset(a: TestsetArgs) -> anyhow::Result<()> {
     let index_path = a.data.join("dataset.json");
     let index: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(&index_path)

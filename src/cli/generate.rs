@@ -1,0 +1,517 @@
+//! `physnap generate`: sample the prior (guided by a scan when one is given), export every
+//! sample and rank them into `ranking.json`. The sampling flags here are shared with
+//! `physnap eval guided`.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use anyhow::{Context, bail};
+use clap::{Args, Parser, Subcommand};
+use physnap::data::categories::category_index;
+use physnap::engine::EngineError;
+use physnap::engine::generate::{GenerateRequest, JointMotion, PartShapes, Retrieval, generate_with as run_generate};
+use physnap::engine::guidance::{GuidanceOptions, SdfField};
+use physnap::engine::sample::Sampler;
+use physnap::engine::schedule::Schedule;
+use physnap::eval::guided::metrics as guided_metrics;
+use physnap::export::{ExportOptions, export_dir, mesh_parts};
+use physnap::io::manifest::{Entry, LoadedModels, Manifest, load_models, to_string as manifest_to_string};
+use physnap::mesh::MeshingOptions;
+use physnap::model::Compute;
+use physnap::model::denoiser::DenoiserConfig;
+use physnap::model::shape_prior::LatentSdfDecoder;
+use physnap::model::weights::sha256_hex;
+use physnap::pointcloud::{Limits, PointCloud};
+use physnap::train::codebook::{CODEBOOK_WEIGHTS_FILE, CodebookReport, DEFAULT_CHECK_RESOLUTION, build_codebook};
+use physnap::train::diffusion::{DiffusionTrainConfig, load_data, train_diffusion};
+use physnap::train::shape::{DecoderBackward, Encoding, ShapeTrainConfig, encode_shape_dir, load_shape_prior, model_config_of, read_model_config, train_shape, write_atomic};
+
+#[derive(Args, Debug)]
+pub(crate) struct GenerateArgs {
+    /// Weights directory with manifest.json.
+    #[arg(long, env = "PHYSNAP_WEIGHTS", default_value = "weights")]
+    pub(crate) weights: PathBuf,
+    /// Category (e.g. StorageFurniture); omit for unconditional generation.
+    #[arg(long, env = "PHYSNAP_CATEGORY")]
+    pub(crate) category: Option<String>,
+    /// Number of samples.
+    #[arg(long, env = "PHYSNAP_SAMPLES", default_value_t = 1)]
+    pub(crate) samples: usize,
+    /// Seed of the first sample (sample i uses seed + i).
+    #[arg(long, env = "PHYSNAP_SEED", default_value_t = 0)]
+    pub(crate) seed: u64,
+    /// Output directory (one sample_NNN folder per sample).
+    #[arg(long, env = "PHYSNAP_OUT")]
+    pub(crate) out: PathBuf,
+    /// Marching-cubes grid cells per axis.
+    #[arg(long, env = "PHYSNAP_MC_RESOLUTION", default_value_t = physnap::mesh::DEFAULT_RESOLUTION)]
+    pub(crate) resolution: usize,
+    /// Observed partial point cloud (PLY, NPY or JSON; object frame, metres): PhysNAP guidance
+    /// (pc+pen+mob by default), samples ranked by D_pc into ranking.json.
+    #[arg(long, env = "PHYSNAP_POINTS")]
+    pub(crate) points: Option<PathBuf>,
+    /// Weight of the point-cloud loss (default with --points: 45 ÷ active terms).
+    #[arg(long, env = "PHYSNAP_W_PC")]
+    pub(crate) w_pc: Option<f64>,
+    /// Weight of the penetration loss (default with --points: physnap's 3 × the paper's 2 ÷
+    /// active terms, 2 for pc+pen+mob; 0 turns it off).
+    #[arg(long, env = "PHYSNAP_W_PEN")]
+    pub(crate) w_pen: Option<f64>,
+    /// Weight of the mobility loss (default with --points: physnap's 3 × the paper's 2 ÷ active
+    /// terms, 2 for pc+pen+mob; 0 turns it off).
+    #[arg(long, env = "PHYSNAP_W_MOB")]
+    pub(crate) w_mob: Option<f64>,
+    /// Sampler and guidance schedule.
+    #[command(flatten)]
+    pub(crate) sampling: SamplingArgs,
+}
+
+/// The category-guidance flag of every command that samples locally.
+#[derive(Args, Debug)]
+pub(crate) struct CategoryGuidanceArgs {
+    /// Classifier-free category guidance w for category-conditioned samples:
+    /// ε̂ = ε̂(c) + w·(ε̂(c) − ε̂(∅)) (0: plain conditioning; > 0 doubles the denoiser's work).
+    /// Default: 2 without loss guidance, 0 when a scan guides the sample (w = 2 completed scans
+    /// worse).
+    #[arg(long, env = "PHYSNAP_CATEGORY_GUIDANCE")]
+    pub(crate) category_guidance: Option<f64>,
+    /// Apply the category guidance only in steps with diffusion time t below this, 1-1000;
+    /// above it the plain conditional prediction is used (one forward). Default: 500 without
+    /// loss guidance, 1000 (every step) when a scan guides the sample.
+    #[arg(long, env = "PHYSNAP_CATEGORY_GUIDANCE_BELOW")]
+    pub(crate) category_guidance_below: Option<usize>,
+}
+
+impl CategoryGuidanceArgs {
+    /// `--category-guidance`, or its default for a sample with or without loss guidance.
+    pub(crate) fn weight(&self, loss_guided: bool) -> f64 {
+        physnap::engine::sample::category_guidance(self.category_guidance, loss_guided)
+    }
+
+    /// `--category-guidance-below`, or its default for a sample with or without loss guidance.
+    pub(crate) fn below(&self, loss_guided: bool) -> usize {
+        physnap::engine::sample::category_guidance_below(self.category_guidance_below, loss_guided)
+    }
+}
+
+/// Sampler and guidance-schedule flags shared by `generate` and `eval guided`.
+#[derive(Args, Debug)]
+pub(crate) struct SamplingArgs {
+    /// Guide the steps with diffusion time t < this (n_g).
+    #[arg(long, env = "PHYSNAP_GUIDANCE_STEPS", default_value_t = physnap::engine::guidance::DEFAULT_GUIDED_STEPS)]
+    pub(crate) guidance_steps: usize,
+    /// Temperature τ of the point-to-part soft assignment.
+    #[arg(long, env = "PHYSNAP_TAU", default_value_t = physnap::engine::guidance::DEFAULT_TAU)]
+    pub(crate) tau: f64,
+    /// Clamp each guidance-gradient entry to ±this (model space); a deviation from the paper's
+    /// raw gradient, which diverges with the shipped weights. 0: off (the paper's raw step).
+    #[arg(long, env = "PHYSNAP_GUIDANCE_MAX_STEP", default_value_t = physnap::engine::guidance::DEFAULT_MAX_STEP)]
+    pub(crate) guidance_max_step: f64,
+    /// Refinement: small clamped gradient steps (a tenth of --guidance-max-step) on the guidance
+    /// loss of the finished sample (physnap, not in the paper; 0: off).
+    #[arg(long, env = "PHYSNAP_GUIDANCE_REFINE_STEPS", default_value_t = physnap::engine::guidance::DEFAULT_REFINE_STEPS)]
+    pub(crate) guidance_refine_steps: usize,
+    /// Physics-only refinement: this many more such steps after those, on ℓ_pen and ℓ_mob alone
+    /// (ℓ_pc off), which push out the small overlaps ℓ_pc holds in place (physnap; 0: off).
+    #[arg(long, env = "PHYSNAP_GUIDANCE_REFINE_PHYSICS_STEPS", default_value_t = physnap::engine::guidance::DEFAULT_REFINE_PHYSICS_STEPS)]
+    pub(crate) guidance_refine_physics_steps: usize,
+    /// Reverse-step rule: ddim (default) or ddpm (NAP; strided ancestral with --steps < 1000).
+    /// The paper's sampler is `--sampler ddpm --steps 0`.
+    #[arg(long, env = "PHYSNAP_SAMPLER", default_value = "ddim", value_parser = ["ddpm", "ddim"])]
+    pub(crate) sampler: String,
+    /// Reverse steps (0: all 1000). Guidance applies to those with t < --guidance-steps.
+    #[arg(long, env = "PHYSNAP_STEPS", default_value_t = physnap::engine::sample::DEFAULT_STEPS)]
+    pub(crate) steps: usize,
+    /// DDIM noise level η in [0, 1].
+    #[arg(long, env = "PHYSNAP_DDIM_ETA", default_value_t = 0.0)]
+    pub(crate) eta: f64,
+    /// Replace part shapes by their nearest training code of the weights' codebook: auto
+    /// (empty shapes when the weights have a codebook, else off), off, empty (shapes that mesh
+    /// empty), all (every latent shape: NAP's retrieval variant), category (every latent shape
+    /// of a category-conditioned sample, from that category's codes; samples without a
+    /// category: as empty).
+    #[arg(long, env = "PHYSNAP_RETRIEVAL", default_value = "auto", value_parser = ["auto", "off", "empty", "all", "category"])]
+    pub(crate) retrieval: String,
+    /// Joint motions of the projected samples: dominant (default: each joint keeps only its
+    /// wider range, in units of the feature scales, so it rotates, slides or is fixed) or
+    /// screw (NAP: both ranges kept).
+    #[arg(long, env = "PHYSNAP_JOINT_MOTION", default_value = "dominant", value_parser = ["screw", "dominant"])]
+    pub(crate) joint_motion: String,
+    /// Category guidance.
+    #[command(flatten)]
+    pub(crate) category: CategoryGuidanceArgs,
+}
+
+/// `--guidance-max-step` to the engine's option: 0 turns the clamp off (the paper's raw step);
+/// other values, negative ones included, go to the engine, which validates them.
+pub(crate) fn max_step(flag: f64) -> Option<f64> {
+    (flag != 0.0).then_some(flag)
+}
+
+/// The `--retrieval` flag against the loaded weights: `auto` is `empty` with a codebook and
+/// `off` without one; `empty` / `all` without a codebook are refused.
+pub(crate) fn retrieval_mode(flag: &str, models: &LoadedModels) -> anyhow::Result<Retrieval> {
+    let has = models.codebook.is_some();
+    match (flag, Retrieval::parse(flag)) {
+        ("auto", _) => Ok(if has {
+            Retrieval::Empty
+        } else {
+            Retrieval::Off
+        }),
+        (_, Some(Retrieval::Off)) => Ok(Retrieval::Off),
+        (_, Some(r)) if has => Ok(r),
+        (_, Some(_)) => bail!(
+            "invalid --retrieval {flag:?}: these weights have no codebook (manifest.json has no \"codebook\" entry); add one with `physnap train codebook` or use --retrieval off"
+        ),
+        (_, None) => {
+            bail!("invalid --retrieval {flag:?} (must be auto, off, empty, all or category)")
+        }
+    }
+}
+
+/// The `--joint-motion` flag.
+pub(crate) fn joint_motion(flag: &str) -> anyhow::Result<JointMotion> {
+    JointMotion::parse(flag)
+        .with_context(|| format!("invalid --joint-motion {flag:?} (must be screw or dominant)"))
+}
+
+/// The `--sampler` / `--eta` flags (`ddim` or `ddpm`; clap has checked the name).
+pub(crate) fn sampler(name: &str, eta: f64) -> Sampler {
+    match name {
+        "ddim" => Sampler::Ddim { eta },
+        _ => Sampler::Ddpm,
+    }
+}
+
+pub(crate) fn generate(a: GenerateArgs) -> anyhow::Result<()> {
+    let manifest_path = a.weights.join("manifest.json");
+    if !manifest_path.is_file() {
+        bail!(
+            "no trained weights at {} (train them with `physnap train shape` and `physnap train diffusion`, see README)",
+            manifest_path.display()
+        );
+    }
+    let device = physnap::model::cpu();
+    let models = load_models(&a.weights, &device)?;
+    let category = match &a.category {
+        None => None,
+        Some(c) => {
+            let idx = category_index(c)
+                .filter(|&i| i < models.manifest.categories.len())
+                .with_context(|| {
+                    format!(
+                        "invalid --category {c:?} (must be one of: {})",
+                        models.manifest.categories.join(", ")
+                    )
+                })?;
+            if models.manifest.denoiser.config.categories == 0 {
+                bail!("invalid --category {c:?}: these weights are unconditional");
+            }
+            Some(idx)
+        }
+    };
+    if a.samples == 0 {
+        bail!("invalid --samples: 0 (must be at least 1)");
+    }
+    let guidance = guidance_options(&a)?;
+    let loss_guided = guidance.as_ref().is_some_and(|g| g.is_active());
+    let sampler = sampler(&a.sampling.sampler, a.sampling.eta);
+    let req = GenerateRequest {
+        seed: a.seed,
+        samples: a.samples,
+        category,
+        category_name: category.map(|i| models.manifest.categories[i].clone()),
+        meshing: MeshingOptions {
+            resolution: a.resolution,
+        },
+        guidance: guidance.clone(),
+        sampler,
+        steps: a.sampling.steps,
+        retrieval: retrieval_mode(&a.sampling.retrieval, &models)?,
+        category_guidance: a.sampling.category.weight(loss_guided),
+        category_guidance_below: Some(a.sampling.category.below(loss_guided)),
+        joint_motion: joint_motion(&a.sampling.joint_motion)?,
+        ..Default::default()
+    };
+    req.meshing.validate()?;
+    let schedule = Schedule::default();
+    let steps = physnap::engine::schedule::timesteps(schedule.len(), a.sampling.steps).len();
+    let pb = super::progress_bar(a.samples * steps, "generate");
+    let decoder = LatentSdfDecoder::new(&models.shape_prior.decoder);
+    let started = std::time::Instant::now();
+    let mut last_losses = None;
+    // One request per sample (sample i uses seed + i either way), so a guided sample that
+    // diverges is reported and the others still count for best-of-N.
+    let mut results = Vec::new();
+    let mut diverged = Vec::new();
+    for i in 0..a.samples {
+        let one = GenerateRequest {
+            seed: a.seed.wrapping_add(i as u64),
+            samples: 1,
+            ..req.clone()
+        };
+        let shapes = PartShapes {
+            decoder: &decoder,
+            field: Some(&decoder as &dyn SdfField),
+            codebook: models.codebook.as_ref(),
+        };
+        let r = run_generate(
+            &models.denoiser,
+            &shapes,
+            &models.manifest.feature_scales,
+            &schedule,
+            &one,
+            &mut |e| {
+                pb.set_position((i * e.step.total + e.step.step) as u64);
+                if let Some(l) = e.step.guidance {
+                    last_losses = Some(l);
+                }
+                ControlFlow::Continue(())
+            },
+        );
+        match r {
+            Ok(mut out) => {
+                let mut g = out.remove(0);
+                g.index = i;
+                g.object.name = format!("sample_{i:03}");
+                results.push(g);
+            }
+            Err(e @ EngineError::Diverged { .. }) => {
+                pb.println(format!("sample_{i:03} (seed {}): {e}", one.seed));
+                diverged.push((format!("sample_{i:03}"), one.seed, e.to_string()));
+            }
+            Err(e) => return Err(e.into()),
+        }
+    }
+    pb.finish_and_clear();
+    if results.is_empty() {
+        bail!(
+            "all {} samples diverged (first: {}); lower the guidance weights (--w-pc/--w-pen/--w-mob) or --guidance-steps",
+            a.samples,
+            diverged.first().map(|d| d.2.as_str()).unwrap_or("")
+        );
+    }
+    let per_sample = started.elapsed().as_secs_f64() / a.samples as f64;
+    let opts = ExportOptions {
+        meshing: req.meshing,
+        ..Default::default()
+    };
+    let mut rows = Vec::new();
+    for g in &results {
+        let name = format!("sample_{:03}", g.index);
+        let dir = a.out.join(&name);
+        export_dir(&g.object, &g.meshes, &dir, &opts)?;
+        println!(
+            "{}: {} parts, {} joints (seed {})",
+            dir.display(),
+            g.object.parts.len(),
+            g.object.joints.len(),
+            g.seed
+        );
+        if !g.retrieved.is_empty() {
+            println!(
+                "  parts {:?} took their nearest codebook shape (--retrieval {})",
+                g.retrieved,
+                req.retrieval.as_str()
+            );
+        }
+        if let Some(opts) = &guidance {
+            let m = guided_metrics(&decoder, &g.raw, &g.object, &g.meshes, &opts.points, g.seed);
+            rows.push((name, g.seed, m));
+        }
+    }
+    println!("{per_sample:.1} s per sample (sampling + meshing)");
+    if let Some(l) = last_losses {
+        println!(
+            "last guided step: ℓ_pc {:.4e}, ℓ_pen {:.4e}, ℓ_mob {:.4e}, weighted {:.4e}",
+            l.pc, l.pen, l.mob, l.total
+        );
+    }
+    if let (Some(opts), Some(points)) = (&guidance, &a.points) {
+        write_ranking(&a.out, points, opts, rows, &diverged)?;
+    }
+    Ok(())
+}
+
+/// The guidance of `generate`: paper defaults for the terms that are on, flags override.
+pub(crate) fn guidance_options(a: &GenerateArgs) -> anyhow::Result<Option<GuidanceOptions>> {
+    let points = match &a.points {
+        Some(path) => {
+            let cloud = PointCloud::read(
+                path,
+                &Limits {
+                    min_points: 1,
+                    max_points: physnap::engine::guidance::MAX_POINTS,
+                },
+            )
+            .with_context(|| format!("invalid --points {}", path.display()))?;
+            cloud.points
+        }
+        None => Vec::new(),
+    };
+    if points.is_empty() && a.w_pc.is_some_and(|w| w > 0.0) {
+        bail!("invalid --w-pc: needs --points (the observed point cloud)");
+    }
+    if points.is_empty() && a.w_pen.is_none() && a.w_mob.is_none() {
+        return Ok(None);
+    }
+    let [w_pc, w_pen, w_mob] =
+        GuidanceOptions::weights_or_defaults([a.w_pc, a.w_pen, a.w_mob], !points.is_empty());
+    let opts = GuidanceOptions {
+        points,
+        w_pc,
+        w_pen,
+        w_mob,
+        steps: a.sampling.guidance_steps,
+        tau: a.sampling.tau,
+        max_step: max_step(a.sampling.guidance_max_step),
+        refine_steps: a.sampling.guidance_refine_steps,
+        refine_physics_steps: a.sampling.guidance_refine_physics_steps,
+    };
+    opts.validate(Schedule::default().len())?;
+    Ok(Some(opts))
+}
+
+/// `ranking.json`: samples by ascending D_pc (the paper's best-of-N), the best one marked.
+pub(crate) fn write_ranking(
+    out: &Path,
+    points: &Path,
+    opts: &GuidanceOptions,
+    mut rows: Vec<(String, u64, physnap::eval::guided::GuidedMetrics)>,
+    diverged: &[(String, u64, String)],
+) -> anyhow::Result<()> {
+    rows.sort_by(|a, b| {
+        let key = |m: &physnap::eval::guided::GuidedMetrics| {
+            if m.d_pc.is_finite() {
+                m.d_pc
+            } else {
+                f64::INFINITY
+            }
+        };
+        key(&a.2).total_cmp(&key(&b.2)).then(a.0.cmp(&b.0))
+    });
+    let num = |v: f64| {
+        if v.is_finite() {
+            serde_json::json!(v)
+        } else {
+            serde_json::Value::Null
+        }
+    };
+    let ranked: Vec<serde_json::Value> = rows
+        .iter()
+        .enumerate()
+        .map(|(r, (name, seed, m))| {
+            serde_json::json!({
+                "rank": r + 1,
+                "sample": name,
+                "seed": seed,
+                "best": r == 0,
+                "d_pc": num(m.d_pc),
+                "e_pc": num(m.e_pc),
+                "e_pen": num(m.e_pen),
+                "e_mob": num(m.e_mob),
+                "o_mesh": num(m.o_mesh),
+            })
+        })
+        .collect();
+    let best = rows.first().map(|r| r.0.clone());
+    let doc = serde_json::json!({
+        "format": "physnap.ranking/v1",
+        "points": points.display().to_string(),
+        "ranked_by": "d_pc (mean point-to-mesh distance, m)",
+        "guidance": {
+            "w_pc": opts.w_pc, "w_pen": opts.w_pen, "w_mob": opts.w_mob,
+            "steps": opts.steps, "tau": opts.tau,
+        },
+        "best": best,
+        "samples": ranked,
+        "diverged": diverged.iter().map(|(name, seed, error)| serde_json::json!({
+            "sample": name, "seed": seed, "error": error,
+        })).collect::<Vec<_>>(),
+    });
+    let path = out.join("ranking.json");
+    std::fs::write(&path, serde_json::to_string_pretty(&doc)? + "\n")?;
+    for (r, (name, _, m)) in rows.iter().enumerate() {
+        println!(
+            "{}{}: D_pc {:.4} E_pc {:.5} E_pen {:.5} E_mob {:.5}",
+            if r == 0 { "best " } else { "     " },
+            name,
+            m.d_pc,
+            m.e_pc,
+            m.e_pen,
+            m.e_mob
+        );
+    }
+    println!("ranking: {}", path.display());
+    Ok(())
+}
+
+/// Clouds of `dir`: from testset.json when present (with categories), else every cloud file.
+pub(crate) fn read_clouds(
+    dir: &Path,
+    skip: usize,
+    max: usize,
+) -> anyhow::Result<Vec<physnap::eval::guided::Cloud>> {
+    let limits = Limits {
+        min_points: 1,
+        max_points: physnap::engine::guidance::MAX_POINTS,
+    };
+    let index = dir.join("testset.json");
+    let mut entries: Vec<(String, Option<usize>, std::path::PathBuf)> = Vec::new();
+    if index.is_file() {
+        let doc: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&index)?)
+            .with_context(|| format!("parsing {}", index.display()))?;
+        for c in doc["clouds"].as_array().into_iter().flatten() {
+            let id = c["id"].as_str().unwrap_or_default().to_string();
+            let file = c["cloud"].as_str().with_context(|| {
+                format!("{}: cloud entry without a \"cloud\" file", index.display())
+            })?;
+            let category = c["category"].as_str().and_then(category_index);
+            entries.push((id, category, dir.join(file)));
+        }
+    } else {
+        let mut files: Vec<_> = std::fs::read_dir(dir)
+            .with_context(|| format!("invalid --clouds {}", dir.display()))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| physnap::pointcloud::Format::from_path(p).is_some())
+            .collect();
+        files.sort();
+        for p in files {
+            let id = p
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            entries.push((id, None, p));
+        }
+    }
+    let available = entries.len();
+    if skip > 0 {
+        if skip >= available {
+            bail!(
+                "invalid --skip-clouds: {skip} (must be below the {available} clouds in {})",
+                dir.display()
+            );
+        }
+        entries.drain(..skip);
+    }
+    if max > 0 {
+        entries.truncate(max);
+    }
+    if entries.is_empty() {
+        bail!(
+            "invalid --clouds {}: no point clouds (must hold testset.json or .ply/.npy/.json files)",
+            dir.display()
+        );
+    }
+    entries
+        .into_iter()
+        .map(|(id, category, path)| {
+            let cloud = PointCloud::read(&path, &limits)
+                .with_context(|| format!("reading {}", path.display()))?;
+            Ok(physnap::eval::guided::Cloud {
+                id,
+                category,
+                points: cloud.points,
+            })
+        })
+        .collect()
+}

@@ -1,0 +1,124 @@
+//! The `physnap` command line: the top-level parser, logging set-up and dispatch to one module
+//! per subcommand. The work itself lives in the library; these modules turn flags into library
+//! calls, show progress and print what happened.
+//!
+//! Every flag has a `PHYSNAP_*` environment twin (clap `env`), so the same settings work from
+//! a shell, a container or a compose file. Errors from the library layers are reported once,
+//! here, with their full cause chain.
+
+mod client;
+mod data;
+mod eval;
+mod export;
+mod generate;
+mod progress;
+mod render;
+mod serve;
+mod train;
+
+pub(crate) use progress::progress_bar;
+
+use std::process::ExitCode;
+use clap::{Parser, Subcommand};
+use data::DataCommand;
+use eval::EvalCommand;
+use export::ExportArgs;
+use generate::GenerateArgs;
+use render::RenderArgs;
+use train::TrainCommand;
+
+/// PhysNAP: complete, physically plausible articulated 3D models from partial point clouds.
+#[derive(Parser, Debug)]
+#[command(version, about, long_about = None)]
+pub(crate) struct Cli {
+    /// Log filter (tracing EnvFilter syntax), e.g. "info" or "physnap=debug".
+    #[arg(long, env = "PHYSNAP_LOG", default_value = "info", global = true)]
+    pub(crate) log: String,
+
+    /// Seconds between progress log lines when stderr is not a terminal (logs, CI, containers),
+    /// where the progress bar is hidden; 0 turns them off.
+    #[arg(
+        long,
+        env = "PHYSNAP_PROGRESS_INTERVAL",
+        default_value_t = 30.0,
+        global = true
+    )]
+    pub(crate) progress_interval: f64,
+
+    #[command(subcommand)]
+    pub(crate) command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub(crate) enum Command {
+    /// Write GLB + URDF (+ meshes, zip bundle) for an articulated-object JSON.
+    Export(ExportArgs),
+    /// Draw objects to a PNG: one object at rest and at its joint limits, or a contact sheet.
+    Render(RenderArgs),
+    /// Train the shape prior or the articulation denoiser.
+    Train {
+        #[command(subcommand)]
+        command: TrainCommand,
+    },
+    /// Generate articulated objects with trained weights (GLB + URDF per sample).
+    Generate(GenerateArgs),
+    /// Data sets: procedural objects, PartNet-Mobility import, partial scans.
+    Data {
+        #[command(subcommand)]
+        command: DataCommand,
+    },
+    /// Evaluate trained weights with the paper's metrics.
+    Eval {
+        #[command(subcommand)]
+        command: EvalCommand,
+    },
+    /// Run the inference service: REST + SSE, gRPC, admin (metrics, health); see README.
+    Serve(serve::ServeArgs),
+    /// Exit 0 when a running server's admin /readyz answers 200 (container health checks).
+    Healthcheck(serve::HealthcheckArgs),
+    /// Submit a point cloud to a running server (gRPC); with --out, watch it and download.
+    Submit(client::SubmitArgs),
+    /// Follow a job on a running server (progress bar); with --out, download its artefacts.
+    Watch(client::WatchArgs),
+}
+
+pub(crate) fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let filter = tracing_subscriber::EnvFilter::try_new(&cli.log)
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .init();
+    if !(cli.progress_interval.is_finite() && cli.progress_interval >= 0.0) {
+        eprintln!(
+            "error: --progress-interval must be finite and >= 0 seconds (0: off), got {}",
+            cli.progress_interval
+        );
+        return ExitCode::FAILURE;
+    }
+    let _ = progress::PROGRESS_INTERVAL.set(cli.progress_interval);
+    match run(cli.command) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+pub(crate) fn run(command: Command) -> anyhow::Result<()> {
+    match command {
+        Command::Export(a) => export::export(a),
+        Command::Render(a) => render::render(a),
+        Command::Train { command } => train::run(command),
+        Command::Generate(a) => generate::generate(a),
+        Command::Serve(a) => serve::serve(a),
+        Command::Healthcheck(a) => serve::healthcheck(a),
+        Command::Submit(a) => client::submit(a),
+        Command::Watch(a) => client::watch(a),
+        Command::Data { command } => data::run(command),
+        Command::Eval { command } => eval::run(command),
+    }
+}

@@ -152,11 +152,7 @@ pub(crate) fn max_step(flag: f64) -> Option<f64> {
 pub(crate) fn retrieval_mode(flag: &str, models: &LoadedModels) -> anyhow::Result<Retrieval> {
     let has = models.codebook.is_some();
     match (flag, Retrieval::parse(flag)) {
-        ("auto", _) => Ok(if has {
-            Retrieval::Empty
-        } else {
-            Retrieval::Off
-        }),
+        ("auto", _) => Ok(Retrieval::auto(has)),
         (_, Some(Retrieval::Off)) => Ok(Retrieval::Off),
         (_, Some(r)) if has => Ok(r),
         (_, Some(_)) => bail!(
@@ -376,19 +372,11 @@ pub(crate) fn write_ranking(
     out: &Path,
     points: &Path,
     opts: &GuidanceOptions,
-    mut rows: Vec<(String, u64, physnap::eval::guided::GuidedMetrics)>,
+    rows: Vec<(String, u64, physnap::eval::guided::GuidedMetrics)>,
     diverged: &[(String, u64, String)],
 ) -> anyhow::Result<()> {
-    rows.sort_by(|a, b| {
-        let key = |m: &physnap::eval::guided::GuidedMetrics| {
-            if m.d_pc.is_finite() {
-                m.d_pc
-            } else {
-                f64::INFINITY
-            }
-        };
-        key(&a.2).total_cmp(&key(&b.2)).then(a.0.cmp(&b.0))
-    });
+    // Rows come in sample order (sample_000, sample_001, ...), so ties stay in name order.
+    let rows = physnap::eval::rank::ranked(rows, |r| r.2.d_pc);
     let num = |v: f64| {
         if v.is_finite() {
             serde_json::json!(v)

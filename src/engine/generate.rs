@@ -58,6 +58,16 @@ impl Retrieval {
         }
     }
 
+    /// What `auto` (the CLI's and the service's default) means for weights with or without a
+    /// retrieval codebook: replace the shapes that mesh empty when there is one, else off.
+    pub fn auto(has_codebook: bool) -> Self {
+        if has_codebook {
+            Retrieval::Empty
+        } else {
+            Retrieval::Off
+        }
+    }
+
     /// The mode for a sample drawn without a category: `Category` becomes `Empty` (the
     /// evaluations' mixed runs use it), the others stay.
     pub fn without_category(self) -> Self {

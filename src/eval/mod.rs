@@ -7,4 +7,5 @@
 
 pub mod generative;
 pub mod guided;
+pub mod rank;
 pub mod shape_iou;

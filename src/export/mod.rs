@@ -173,17 +173,8 @@ pub fn zip_bundle(bundle: &urdf::UrdfBundle) -> Result<Vec<u8>, ExportError> {
 /// Write `bytes` to `path` via a temporary sibling and a rename, so readers never see a
 /// half-written file.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ExportError> {
-    let tmp = path.with_extension(format!(
-        "{}.tmp",
-        path.extension().and_then(|e| e.to_str()).unwrap_or("")
-    ));
-    let io = |source| ExportError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let mut f = std::fs::File::create(&tmp).map_err(io)?;
-    f.write_all(bytes).map_err(io)?;
-    f.sync_all().map_err(io)?;
-    drop(f);
-    std::fs::rename(&tmp, path).map_err(io)
+    crate::io::atomic::write(path, bytes).map_err(|e| ExportError::Io {
+        path: e.path,
+        source: e.source,
+    })
 }

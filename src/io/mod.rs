@@ -3,6 +3,7 @@
 //! Why it exists: serialisation is kept out of the core (`object`, `graph`, `mesh`,
 //! `kinematics` never import serde); this layer maps wire/file shapes onto core types and back.
 
+pub mod atomic;
 pub mod manifest;
 pub mod npy;
 pub mod object_json;

@@ -124,9 +124,7 @@ pub fn save<M: Module + ModuleSnapshot>(module: &M, path: &Path) -> Result<Strin
         path: path.display().to_string(),
         source,
     };
-    let tmp = path.with_extension("safetensors.tmp");
-    std::fs::write(&tmp, &bytes).map_err(io)?;
-    std::fs::rename(&tmp, path).map_err(io)?;
+    crate::io::atomic::write(path, &bytes).map_err(|e| io(e.source))?;
     Ok(sha256_hex(&bytes))
 }
 

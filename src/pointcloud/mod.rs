@@ -321,46 +321,8 @@ pub(crate) fn snippet(bytes: &[u8]) -> String {
 }
 
 pub(crate) fn atomic_write(path: &Path, bytes: &[u8]) -> Result<(), PointCloudError> {
-    static COUNTER: AtomicU64 = AtomicU64::new(0);
-    let io_err = |p: &Path, source| PointCloudError::Io {
-        path: p.to_path_buf(),
-        source,
-    };
-    let Some(file_name) = path.file_name() else {
-        return Err(io_err(
-            path,
-            std::io::Error::new(std::io::ErrorKind::InvalidInput, "path has no file name"),
-        ));
-    };
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let tmp = dir.join(format!(
-        ".{}.{}.{}.tmp",
-        file_name.to_string_lossy(),
-        std::process::id(),
-        COUNTER.fetch_add(1, Ordering::Relaxed)
-    ));
-    let mut file = fs::OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .open(&tmp)
-        .map_err(|e| io_err(&tmp, e))?;
-    let written = file.write_all(bytes).and_then(|()| file.sync_all());
-    drop(file);
-    if let Err(e) = written {
-        let _ = fs::remove_file(&tmp);
-        return Err(io_err(&tmp, e));
-    }
-    if let Err(e) = fs::rename(&tmp, path) {
-        let _ = fs::remove_file(&tmp);
-        return Err(io_err(path, e));
-    }
-    // Make the rename itself durable (best effort: not every platform can fsync a directory).
-    #[cfg(unix)]
-    if let Ok(d) = fs::File::open(dir) {
-        let _ = d.sync_all();
-    }
-    Ok(())
+    crate::io::atomic::write(path, bytes).map_err(|e| PointCloudError::Io {
+        path: e.path,
+        source: e.source,
+    })
 }

@@ -384,16 +384,12 @@ pub fn run_job(
         });
     }
     // Best-of-N by D_pc (NaN, i.e. no mesh, ranks last; ties by index).
-    let mut ranked: Vec<(f64, Generated)> = done_samples
+    // `done_samples` is in index order, so ties stay in index order.
+    let scored: Vec<(f64, Generated)> = done_samples
         .into_iter()
         .map(|g| (d_pc(&g.meshes, &spec.points), g))
         .collect();
-    let key = |v: f64| if v.is_finite() { v } else { f64::INFINITY };
-    ranked.sort_by(|a, b| {
-        key(a.0)
-            .total_cmp(&key(b.0))
-            .then(a.1.index.cmp(&b.1.index))
-    });
+    let mut ranked = crate::eval::rank::ranked(scored, |s| s.0);
     let mut rows: Vec<Ranked> = ranked
         .iter()
         .map(|(d, g)| Ranked {

@@ -530,9 +530,8 @@ pub fn validate(
             resolution,
         ));
     }
-    // auto: replace shapes that mesh empty when the weights have a codebook, else off.
     let retrieval = match input.retrieval.as_deref().filter(|r| !r.is_empty()) {
-        None | Some("auto") => if caps.codebook { "empty" } else { "off" }.to_string(),
+        None | Some("auto") => Retrieval::auto(caps.codebook).as_str().to_string(),
         Some(r) => match Retrieval::parse(r) {
             None => {
                 return Err(violation(

@@ -134,9 +134,8 @@ pub fn build_codebook(
             categories: codebook.categories().is_some(),
         },
     });
-    let tmp = manifest_path.with_extension("json.tmp");
-    std::fs::write(&tmp, manifest::to_string(&m)).map_err(TrainError::io(&tmp))?;
-    std::fs::rename(&tmp, &manifest_path).map_err(TrainError::io(&manifest_path))?;
+    crate::io::atomic::write(&manifest_path, manifest::to_string(&m).as_bytes())
+        .map_err(|e| TrainError::io(&e.path)(e.source))?;
     Ok(CodebookReport {
         rows: codebook.rows(),
         candidates,

@@ -201,9 +201,7 @@ pub(crate) fn record_in_manifest(
         m["metrics"] = json!({});
     }
     set(&mut m);
-    let tmp = path.with_extension("json.tmp");
-    std::fs::write(&tmp, serde_json::to_string_pretty(&m)? + "\n")?;
-    std::fs::rename(&tmp, &path)?;
+    physnap::io::atomic::write(&path, (serde_json::to_string_pretty(&m)? + "\n").as_bytes())?;
     Ok(path)
 }
 

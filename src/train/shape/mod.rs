@@ -185,7 +185,5 @@ pub struct ShapeTrainReport {
 
 /// Write `bytes` to `path` atomically (temp file + rename).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), TrainError> {
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, bytes).map_err(TrainError::io(&tmp))?;
-    std::fs::rename(&tmp, path).map_err(TrainError::io(path))
+    crate::io::atomic::write(path, bytes).map_err(|e| TrainError::io(&e.path)(e.source))
 }

@@ -1099,7 +1099,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
         knobs.extend_from_slice(extra);
         repro(&out, ["2", "3", "5"], &knobs)
     };
-    // In two sittings: UNTIL stops after the encoding, the same command without it goes on.
+    // In two runs: UNTIL stops after the encoding, the same command without it goes on.
     let o = again(&[("UNTIL", "encode")]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
@@ -1473,7 +1473,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     // first prior with burn's autodiff (SHAPE_BACKWARD=burn), the single-pass steps of the
     // weights shipped before (DENOISER_SHARDS=1, SHAPE_SHARDS=1), one decoder cycle without
     // the eikonal term and with the wrong-side term (DECODER_WRONG_SIDE=10), NAP's feature
-    // scales for the layout and the codes (LAYOUT_GAIN=1, CODE_GAIN=1: the weights before lg2),
+    // scales for the layout and the codes (LAYOUT_GAIN=1, CODE_GAIN=1: NAP's scaling),
     // a small fitted encoding and no cycle on the codes (CODES_DECODER_STEPS=0: the recipe
     // before 2026-12-01).
     let two = root.path().join("two");
@@ -1510,7 +1510,7 @@ fn the_reproduce_script_runs_the_recipe_at_toy_scale() {
     assert_eq!(summary["overlap_weight"], 2.0, "{summary:#}");
     assert_eq!(diffusion_runs_with(&err, "--batch-shards 1"), 2, "{err}");
     let m = read(&two.join("weights/manifest.json"));
-    // LAYOUT_GAIN=1, CODE_GAIN=1: NAP's scaling, the denoisers shipped before lg2.
+    // LAYOUT_GAIN=1, CODE_GAIN=1: NAP's scaling.
     assert_eq!(m["training"]["diffusion"]["layout_gain"], 1.0, "{m:#}");
     assert_eq!(m["training"]["diffusion"]["code_gain"], 1.0, "{m:#}");
     assert_eq!(diffusion_runs_with(&err, "--code-gain 1"), 2, "{err}");

@@ -489,7 +489,7 @@ pub fn sample_guided(
 /// The node channels a physics-only refinement step moves: each part's box half-extents and
 /// centre (1 there, 0 elsewhere, `[1, 1, NODE_DIM]`). Existence, shape code and joints stay. Left
 /// free, ℓ_pen's cheapest way out is to lower a part's existence (õ_i õ_j weights the pair) or
-/// to reshape it, and on d21k's guided samples 10 steps on every channel deleted whole parts
+/// to reshape it, and on guided samples of earlier weights 10 steps on every channel deleted whole parts
 /// (D_pc 0.0050 → 0.0223 on one scan; EVALUATION.md, "Physics-only refinement").
 fn physics_mask(device: &Device) -> Tensor<3> {
     use crate::graph::node_ch;

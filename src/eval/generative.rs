@@ -498,7 +498,7 @@ pub fn distribution_metrics(
     }
 }
 
-/// Why a generated object does not count as valid (issue 4's definition: ≥ 2 parts, a tree,
+/// Why a generated object does not count as valid (≥ 2 parts, a tree,
 /// every part meshes non-empty). `None` when it is valid.
 pub fn invalid_reason(obj: &ArticulatedObject, meshes: &[TriMesh]) -> Option<String> {
     if obj.parts.len() < 2 {

@@ -87,7 +87,7 @@ pub(crate) fn gt_occupancy(data: &Path, p: &PartRef, grid: &[[f32; 3]]) -> Resul
             format!("part {} missing ({} parts)", p.k, object.parts.len()),
         )
     })?;
-    pub(crate) const CHUNK: usize = 4096;
+    const CHUNK: usize = 4096;
     if let PartShape::Primitives(prims) = &part.shape {
         let sdf = AnalyticSdf {
             primitives: prims,

@@ -366,7 +366,7 @@ mod tests {
     fn category_layers_round_trip_and_default_to_off_in_older_manifests() {
         // A manifest written before the option existed (the denoiser shipped until 2026-11-26)
         // loads as off, and writes back without the field.
-        let older = include_str!("../../docs/eval/category_layers/previous_denoiser_manifest.json");
+        let older = include_str!("testdata/previous_denoiser_manifest.json");
         let m = from_str(older, "previous_denoiser_manifest.json").unwrap();
         assert!(!older.contains("category_layers"));
         assert!(!m.denoiser.config.category_layers);

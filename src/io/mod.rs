@@ -48,3 +48,13 @@ impl FormatError {
         }
     }
 }
+
+/// At most 40 bytes of untrusted input, escaped, for error messages.
+pub(crate) fn snippet(bytes: &[u8]) -> String {
+    const MAX: usize = 40;
+    let mut s = bytes[..bytes.len().min(MAX)].escape_ascii().to_string();
+    if bytes.len() > MAX {
+        s.push_str("...");
+    }
+    s
+}

@@ -1,6 +1,6 @@
 //! The articulated-object JSON: a lossless, human-editable exchange format.
 //!
-//! Why it exists: later issues and the API exchange objects (projection results, generated
+//! Why it exists: the service, the CLI and tests exchange objects (projection results, generated
 //! samples, hand-written examples) as files; `physnap export --object obj.json` turns one into
 //! GLB + URDF. The schema (`"format": "physnap.object/v1"`):
 //!

@@ -21,8 +21,8 @@
 //! is 3.7 on its codebook shapes (median over shapes 1.5, 90th percentile 2.8; the decoder
 //! shipped before reached 2.1), so [`LIPSCHITZ_MARGIN`] = 5, 1.35× the steepest slope seen
 //! (tests/shipped_weights.rs checks both the slope and the dense grid's mesh). The margin costs
-//! decodes: 41 % of the dense grid at 5, 26 % at 3 (41 shapes,
-//! docs/eval/recipe128/v5r2/lipschitz_margins.txt). Non-finite corner values always refine.
+//! decodes: 41 % of the dense grid at 5, 26 % at 3 (41 shapes; `cargo run --release --example
+//! bench_margin`). Non-finite corner values always refine.
 //!
 //! Each octree level is one batch of new points, evaluated in parallel chunks on the current
 //! rayon pool (NAP's MISE, method.md §5.8, refines by sign changes instead, which can miss

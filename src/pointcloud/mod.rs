@@ -32,6 +32,7 @@ mod tests;
 
 pub use ply::*;
 pub use npy::*;
+pub(crate) use crate::io::snippet;
 pub use json::*;
 
 use std::fmt::Write as _;
@@ -183,7 +184,7 @@ pub struct Limits {
 }
 
 impl Default for Limits {
-    pub(crate) fn default() -> Self {
+    fn default() -> Self {
         Limits {
             min_points: 1,
             max_points: 10_000_000,
@@ -310,15 +311,6 @@ pub(crate) fn check_count(count: u64, limits: &Limits) -> Result<usize, PointClo
     Ok(count)
 }
 
-/// At most 40 bytes of untrusted input, escaped, for error messages.
-pub(crate) fn snippet(bytes: &[u8]) -> String {
-    pub(crate) const MAX: usize = 40;
-    let mut s = bytes[..bytes.len().min(MAX)].escape_ascii().to_string();
-    if bytes.len() > MAX {
-        s.push_str("...");
-    }
-    s
-}
 
 pub(crate) fn atomic_write(path: &Path, bytes: &[u8]) -> Result<(), PointCloudError> {
     crate::io::atomic::write(path, bytes).map_err(|e| PointCloudError::Io {

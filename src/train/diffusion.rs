@@ -36,7 +36,7 @@
 //!
 //! Box-overlap penalty (`overlap_weight` = λ > 0; off by default, i.e. NAP's loss): generated
 //! part boxes intersect three to four times as often as the data's, and ten times deeper
-//! (EVALUATION.md, session 37), which guidance then fights. For the samples with t <
+//! (measured on the weights of 2026-11), which guidance then fights. For the samples with t <
 //! `overlap_max_t` the step also decodes the boxes of x̂₀ = (x_t − √(1 − ᾱ_t) ε̂) / √ᾱ_t,
 //! un-scaled to object units, and penalises every pair of parts that exist in x₀ for
 //! intersecting more deeply than the same pair does in x₀:
@@ -76,15 +76,13 @@
 //! Code gain (`code_gain` = G_z; 1 by default): the same division for the 128 shape-code
 //! channels, `model value = raw value / (scale_c / G_z)`. NAP's grouped loss gives the codes
 //! one group, and generated codes land about ten times further from the nearest training code
-//! than held-out parts encode (EVALUATION.md, forty-fifth session); G_z > 1 keeps the codes
+//! than held-out parts encode; G_z > 1 keeps the codes
 //! readable to G_z times the noise, so the reverse process has more steps to place them.
 //! Recorded, applied and checked on resume exactly as the layout gain. Measured with G_z = 2
-//! on the fitted codes of the ws10 decoder (EVALUATION.md, "Code gain", candidate fcg2):
-//! category accuracy 81.6 % over nine seeds against lg2's 80.3 %, 1-NNA ≤ 0.69, and the
-//! generated codes' median distance to the nearest training code 0.61 against 1.03 at
-//! G_z = 1 on the same codes (DDIM 200; 0.71 against 1.28 with DDPM 1000); the shipped
-//! weights use G_z = 2 since 2026-11-30 (fcg2; the recipe's `CODE_GAIN`), while the flag's
-//! default stays NAP's 1.
+//! on fitted codes: category accuracy 81.6 % over nine seeds against 80.3 % at G_z = 1, 1-NNA
+//! ≤ 0.69, and the generated codes' median distance to the nearest training code 0.61 against
+//! 1.03 at G_z = 1 on the same codes (DDIM 200; 0.71 against 1.28 with DDPM 1000); the shipped
+//! weights use G_z = 2 (the recipe's `CODE_GAIN`), while the flag's default stays NAP's 1.
 //!
 //! Category conditioning: each sample carries its object's category index, replaced
 //! by the "no category" row with probability `category_dropout`, so one model serves both the

@@ -2,7 +2,7 @@
 //! without its category.
 //!
 //! Why it exists: the training loss keeps falling over restart cycles while the generative
-//! metrics do not follow (EVALUATION.md, forty-third session), and those metrics take a quarter
+//! metrics do not follow, and those metrics take a quarter
 //! of an hour a seed and are measured on the test split. This measures, in about a minute,
 //! whether the denoiser generalises to objects it never saw (`val`) and how much its category
 //! tells it there: NAP's grouped ε-loss (module [`super::diffusion`])

@@ -39,7 +39,7 @@ pub(crate) struct EvalGenerativeArgs {
     #[arg(long, env = "PHYSNAP_EVAL_PER_CATEGORY", default_value_t = 6)]
     pub(crate) per_category: usize,
     /// Test objects a conditioned sample's nearest neighbour is searched among for the category
-    /// accuracy (seeded choice); 0: the whole test split, the "nearest test object".
+    /// accuracy (seeded choice); 0: the whole test split (the nearest test object).
     #[arg(long, env = "PHYSNAP_EVAL_CATEGORY_REFS", default_value_t = 0)]
     pub(crate) category_refs: usize,
     /// Joint states per object for the instantiation distance (method.md: 10).

@@ -41,7 +41,7 @@ pub(crate) enum EvalCommand {
     /// Guidance metrics (E_pc, D_pc, E_pen, E_mob medians) per variant on test scans, in the
     /// paper's Table 1 layout; writes guided_table.md and guided_table.json.
     Guided(Box<EvalGuidedArgs>),
-    /// Shape prior IoU (issue 4's "mean IoU on val parts at a 64³ grid"): per part and by kind
+    /// Shape prior IoU (mean IoU on val parts at a 64³ grid): per part and by kind
     /// (single primitive, several primitives, mesh, thinner than a grid cell, with a primitive
     /// under a cell thick, every primitive at least 2 cells thick), plus SDF L1.
     Shape(EvalShapeArgs),

@@ -169,7 +169,7 @@ pub struct MeshBvh {
 }
 
 impl std::fmt::Debug for MeshBvh {
-    pub(crate) fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("MeshBvh")
             .field("vertices", &self.positions.len())
             .field("triangles", &self.triangles.len())

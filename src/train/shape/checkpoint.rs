@@ -233,7 +233,7 @@ pub(crate) fn write_codebook(
 ) -> Result<usize, TrainError> {
     // Parts per encoder call (and per fitting batch: each code's fit is its own, so the batch
     // size changes nothing but the speed).
-    pub(crate) const BATCH: usize = 32;
+    const BATCH: usize = 32;
     let s = cfg.surface_points;
     let f = cfg.model.latent;
     let host = HostDecoder::new(&model.decoder);

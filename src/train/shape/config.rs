@@ -136,7 +136,7 @@ impl DecoderBackward {
 }
 
 impl Default for ShapeTrainConfig {
-    pub(crate) fn default() -> Self {
+    fn default() -> Self {
         ShapeTrainConfig {
             model: ShapePriorConfig::default(),
             steps: 10_000,

@@ -39,8 +39,8 @@ use crate::shape::{AnalyticSdf, PartShape, Sdf};
 /// same protocol. The pull toward z₀ keeps a fitted code near the encoder's codes: the plain
 /// fit moves a code by a median 0.215 (the encoder's codes lie 0.089 apart) and spreads the
 /// codes out of the ≈ 16 directions that hold 98.7 % of the encoder codes' variance; on the
-/// ws10 decoder any pull (λ = 0.01 … 1) gave back 0.02 of the fit's IoU (EVALUATION.md,
-/// forty-ninth session), so no recipe uses it yet. A report without an `"encoding"` entry
+/// decoder it was measured with, any pull (λ = 0.01 … 1) gave back 0.02 of the fit's IoU, so
+/// no recipe uses it yet. A report without an `"encoding"` entry
 /// was made by NAP's encoding; one without `"fit_prox"`, by the plain fit.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Encoding {
@@ -56,7 +56,7 @@ pub struct Encoding {
 }
 
 impl Default for Encoding {
-    pub(crate) fn default() -> Self {
+    fn default() -> Self {
         Encoding {
             views: 1,
             fit_steps: 0,

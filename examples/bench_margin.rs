@@ -9,7 +9,7 @@
 //! dense grid (a differing mesh).
 //!
 //! Run: `cargo run --release --example bench_margin -- WEIGHTS_DIR [N]` (default: weights, 40).
-//! Figures: BENCHMARKS.md, docs/eval/recipe128/v5r2/lipschitz_margins.txt.
+//! Figures: BENCHMARKS.md "Meshing".
 
 use std::path::PathBuf;
 

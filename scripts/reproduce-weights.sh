@@ -10,61 +10,54 @@
 # with other knobs than OUT/recipe.knobs is refused, naming the knob. UNTIL=NAME stops after
 # that stage (a stage name of stages.tsv: synth, import, shape, decoderN, encode,
 # decoder_codes, denoiser_stage1, denoiser_stage2, denoiser_decay, denoiser_restartN, eval_shape,
-# eval_generative), to split the recipe over several sittings; it is not one of the knobs a
-# rerun must repeat.
+# eval_generative), to split the recipe into several runs; it is not one of the knobs a rerun
+# must repeat.
 #
 # data synth -> data import -> train shape (12,000 steps, 128 parts x 128 queries x 64 surface
 # points a batch, host backward pass, the parts of each step in two slices) -> three more cosine
 # cycles of the shape prior's decoder with its encoder frozen (train shape --init-from the
 # previous run --freeze-encoder at lr 5e-4: cycle 1 seed 0 eikonal 0.01, cycle 2 seed 1 eikonal
-# 0.03, cycle 3 seed 2 eikonal 0.03 with the wrong-side term --wrong-side 10, "ws10") -> train
-# encode: every part's code from the last cycle, the mean of 16 encoder views fitted 50 Adam
-# steps on 512 SDF samples with the decoder frozen (ENCODER_VIEWS, FIT_STEPS, FIT_QUERIES) ->
-# one more decoder cycle on exactly those codes (train shape --codes, encoder frozen, 3,000
-# steps, seed 3, eikonal 0.03, --wrong-side 10: the decoder learns to decode the codes the
-# denoiser learns, and they stay valid; CODES_DECODER_*) -> train diffusion on those codes (four runs: 2,000 steps at a constant learning rate, then
-# --resume with one cosine decay and a weight EMA to 14,000 steps in two runs, the second
-# (7,000 -> 14,000) with the box-overlap penalty --overlap-weight 3, then one more cosine cycle
-# (warm restart) to 18,000 steps with the penalty; the denoiser adds its category to every graph
-# layer, --category-layers, and trains the part layout and the shape codes at twice NAP's
-# feature scale, --layout-gain 2 --code-gain 2; each step's batch in two slices; the last run
-# builds the retrieval codebook) -> eval shape and eval generative --write-manifest.
-# OUT/weights is then a drop-in replacement for weights/ (the weights shipped since 2026-12-01,
-# fifty-fifth session, "fcg2dc"; weights/README.md "How they were made"). The shipped files were
-# trained stage by stage with these commands, not by one run of this script: the first prior
-# and its first two cycles before --batch-shards existed, with the single pass (SHAPE_SHARDS=1:
-# the same loss up to float rounding, 1.33x / 1.18x slower per step), the codes with ws10 as it
-# was rebuilt in session 45, the cycle on the codes (decoder_codes) after the denoiser, which
-# does not read the decoder (docs/eval/fixed_codes/). Until 2026-11-29 (forty-sixth session) the recipe trained the
-# denoiser before the decoder cycles and installed them with train install-shape; with NAP's
-# encoding both orders give the same codes and weights.
-# Run in one go from scratch on 2 cores (2026-11-30, fifty-fourth session, before the stage
-# decoder_codes existed): 9,561 s = 2 h 39 min from synth to the last denoiser run, plus 577 s of
-# evaluations (BENCHMARKS.md "The recipe in one go", docs/eval/one_go_s54/stages.tsv); the cycle
-# on the codes adds ≈ 470 s (measured alone), ≈ 2 h 47 min in all, ≈ 2 h 55 min at the slower
-# pace the same machine had in session 52: inside the issue's 3-hour budget.
+# 0.03, cycle 3 seed 2 eikonal 0.03 with the wrong-side term --wrong-side 10) -> train encode:
+# every part's code from the last cycle, the mean of 16 encoder views fitted 50 Adam steps on
+# 512 SDF samples with the decoder frozen (ENCODER_VIEWS, FIT_STEPS, FIT_QUERIES) -> one more
+# decoder cycle on exactly those codes (train shape --codes, encoder frozen, 3,000 steps, seed
+# 3, eikonal 0.03, --wrong-side 10: the decoder learns to decode the codes the denoiser learns,
+# and they stay valid; CODES_DECODER_*) -> train diffusion on those codes (four runs: 2,000
+# steps at a constant learning rate, then --resume with one cosine decay and a weight EMA to
+# 14,000 steps in two runs, the second (7,000 -> 14,000) with the box-overlap penalty
+# --overlap-weight 3, then one more cosine cycle (warm restart) to 18,000 steps with the
+# penalty; the denoiser adds its category to every graph layer, --category-layers, and trains
+# the part layout and the shape codes at twice NAP's feature scale, --layout-gain 2 --code-gain
+# 2; each step's batch in two slices; the last run builds the retrieval codebook) -> eval shape
+# and eval generative --write-manifest.
+# OUT/weights is then a drop-in replacement for weights/ (weights/README.md). The shipped files
+# were trained stage by stage with these commands, not by one run of this script: the first
+# prior and its first two cycles with the single pass (SHAPE_SHARDS=1: the same loss up to
+# float rounding, 1.33x / 1.18x slower per step), and the cycle on the codes (decoder_codes)
+# after the denoiser, which does not read the decoder. A run matches their quality, not their
+# bytes.
+# Timing on 2 cores from scratch: ≈ 2 h 47 min of training plus ≈ 10 min of evaluations
+# (BENCHMARKS.md "Training"), ≈ 2 h 55 min on a 13 % slower host: inside a 3-hour budget.
 #
-# Knobs (environment; the defaults are the shipped recipe, smaller values make a smoke run):
+# Knobs (environment; the defaults are the shipped recipe, smaller values make a smoke run;
+# the values that give earlier weights are in CHANGELOG.md):
 #   PHYSNAP_BIN   physnap binary (default: cargo build --release, then target/release/physnap)
 #   OBJECTS (3000)  SHAPE_STEPS (12000)  STAGE1 (2000)  STAGE2 (7000: the decay in two runs, the
 #   second resumed at STAGE2; 0: one run)  STEPS (14000)  BATCH_OBJECTS (16)  CHECKPOINT_EVERY (500)
 #   IMPORT_FLAGS ("")  SHAPE_FLAGS ("", added to every train shape)  DENOISER_FLAGS ("", added
 #   to every train diffusion)
-#   LAYOUT_GAIN (2, as shipped since lg2: every train diffusion's --layout-gain, the part boxes'
-#   and centres' spread in model space; 1: NAP's scaling, the denoisers shipped before
-#   2026-11-30)
-#   CODE_GAIN (2, as shipped since fcg2: every train diffusion's --code-gain, the shape codes'
-#   spread in model space; 1: NAP's scaling, the denoisers shipped before 2026-11-30, fifty-first
-#   session)
+#   LAYOUT_GAIN (2: every train diffusion's --layout-gain, the part boxes' and centres' spread
+#   in model space; 1: NAP's scaling)
+#   CODE_GAIN (2: every train diffusion's --code-gain, the shape codes' spread in model space;
+#   1: NAP's scaling)
 #   SHAPE_BATCH ("--batch-parts 128 --queries-per-part 128 --surface-points 64": the batch of
-#   the first prior and of every decoder cycle; "" gives train shape's defaults, 16 x 2048 x 512,
-#   the recipe of the weights shipped before 2026-11-28)
+#   the first prior and of every decoder cycle; "" gives train shape's defaults, 16 x 2048 x 512)
 #   SHAPE_BACKWARD (host, as shipped: how the first prior's decoder gradients are computed;
 #   burn: burn's autodiff, the same gradients up to float rounding, ≈ 1.6x slower per step)
 #   SHAPE_SHARDS (2: each train shape step's parts in two slices on the two cores; 1: the single
-#   pass the shipped prior and cycles were trained with)
-#   DENOISER_SHARDS (2, as shipped since s14r: each denoiser step's batch in two slices, ≈ 2.1x
-#   the single pass; 1: the single pass of the denoisers shipped before 2026-11-29)
+#   pass the shipped prior and first cycles were trained with)
+#   DENOISER_SHARDS (2: each denoiser step's batch in two slices, ≈ 2.1x the single pass; 1: the
+#   single pass)
 #   DECAY_OVERLAP (3, as shipped: the --overlap-weight of the decay run that ends at STEPS)
 #   RESTART_STEPS ("18000", as shipped: a list of step counts, each one more cosine cycle (warm
 #   restart at --lr, decay to 0.1x) from the previous count to it; 0: none)
@@ -73,35 +66,18 @@
 #   RESTART_SHARDS (2: the restart cycles' batch slices)
 #   DECODER_STEPS (3000; 0: no decoder cycle)  DECODER_CYCLES (3, as shipped; 0: none)
 #   DECODER_EIKONAL ("0.01 0.03 0.03": the eikonal weight of each cycle, one value per cycle; 0
-#   is the plain cycle, which raises the shape IoU more but aligns guided fits worse,
-#   EVALUATION.md)
+#   is the plain cycle, which raises the shape IoU more but aligns guided fits worse)
 #   DECODER_WRONG_SIDE ("0 0 10": the --wrong-side weight of each cycle, one value per cycle;
-#   the third cycle's 10 raises the shape IoU 0.775 -> 0.812 by NAP's encoding, EVALUATION.md
-#   "ws10")
+#   the third cycle's 10 closes walls under a grid cell)
 #   DECODER_FLAGS ("": more flags for every decoder cycle, the one on the codes too)
-#   CODES_DECODER_STEPS (3000; 0: none, the recipe before 2026-12-01)  CODES_DECODER_EIKONAL
-#   (0.03)  CODES_DECODER_WRONG_SIDE (10): the decoder cycle on the fitted codes after train
-#   encode (stage decoder_codes, train shape --codes): shape IoU on all 940 val parts 0.843 ->
-#   0.865 on fcg2, on the 64 val parts 0.857 -> 0.880 on session 54's run
-#   (docs/eval/fixed_codes/)
+#   CODES_DECODER_STEPS (3000; 0: none)  CODES_DECODER_EIKONAL (0.03)  CODES_DECODER_WRONG_SIDE
+#   (10): the decoder cycle on the fitted codes after train encode (stage decoder_codes, train
+#   shape --codes): shape IoU on all 940 val parts 0.843 -> 0.865
 #   ENCODER_VIEWS (16)  FIT_STEPS (50)  FIT_QUERIES (512): train encode's --encoder-views,
-#   --fit-steps and --fit-queries, how the codes the denoiser learns are made (as shipped since
-#   fcg2, shape IoU 0.860 on the 64 val parts; 1, 0, 2048: NAP's encoding, the weights before)
+#   --fit-steps and --fit-queries, how the codes the denoiser learns are made (1, 0, 2048:
+#   NAP's encoding)
 #   EVAL (1: run eval shape and eval generative; 0: skip)
 #   UNTIL ("": run every stage; a stage name: stop after it, above)
-# Earlier shipped weights (their manifests under docs/eval/):
-#   lg2 (2026-11-30, forty-eighth to fiftieth sessions, the weights before fcg2;
-#     docs/eval/code_gain/previous_manifest.json): DECODER_CYCLES=2 DECODER_EIKONAL="0.01 0.03"
-#     DECODER_WRONG_SIDE="0 0" ENCODER_VIEWS=1 FIT_STEPS=0 FIT_QUERIES=2048 CODE_GAIN=1
-#     (≈ 2 h 10 min)
-#   s14r (2026-11-29 to 2026-11-30, the weights before lg2; docs/eval/layout_gain/previous_manifest.json):
-#     the lg2 knobs and LAYOUT_GAIN=1   (≈ 2 h 15 min)
-#   ov3 (2026-11-28, the weights before s14r; docs/eval/single_schedule/previous_manifest.json):
-#     the s14r knobs and STAGE2=0 STEPS=7000 DECAY_OVERLAP=0 RESTART_STEPS="14000 21000 24500" RESTART_OVERLAP="0 0 3"
-#     DENOISER_SHARDS=1 SHAPE_SHARDS=1   (≈ 4 h 40 min)
-#   v5r2 (2026-11-28): the same with RESTART_STEPS=0   (≈ 3 h 25 min)
-#   2026-11-27: the s14r knobs and SHAPE_STEPS=3000 SHAPE_BATCH="" SHAPE_BACKWARD=burn DECODER_EIKONAL="0.01 0.01"
-#     STAGE2=0 STEPS=7000 DECAY_OVERLAP=0 RESTART_STEPS=0 DENOISER_SHARDS=1 SHAPE_SHARDS=1
 set -euo pipefail
 
 OUT=${1:-repro}
@@ -369,8 +345,7 @@ run denoiser_decay train diffusion "${common[@]}" "${decay[@]}" --overlap-weight
   "${decay_codebook[@]}" $DENOISER_FLAGS
 # More cosine cycles (warm restarts): back to lr at the previous count, cosine decay to 0.1 x lr
 # at the next, the weight EMA continued. The one decay to 14,000 reaches category accuracy
-# 65-71 %; the 4,000-step restart after it 81-83 % (s14 -> s14r, EVALUATION.md): the restart
-# is what lifts it, as the cycles of the weights before did (d14k, d21k, ov3).
+# 65-71 %; the 4,000-step restart after it 81-83 %: the restart is what lifts it.
 prev=$STEPS
 for k in "${!restarts[@]}"; do
   cb=(--no-codebook)

@@ -1,6 +1,0 @@
-#!/bin/bash
-# usage: gencat64.sh TAG WEIGHTS SEED — the 52 category samples only (--samples 2 --refs 2), 64³, 1 thread
-tag=$1; w=$2; s=$3
-RAYON_NUM_THREADS=1 /work/bin/physnap-s47a eval generative --weights $w --data /work/data/train \
-  --samples 2 --refs 2 --per-category 4 --states 4 --points 256 --seed $s --resolution 64 \
-  --progress-interval 60 --out gen64_${tag}_$s.json > gen64_${tag}_$s.log 2>&1

@@ -2,6 +2,7 @@
 //! sample and rank them into `ranking.json`. The sampling flags here are shared with
 //! `physnap eval guided`.
 
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use anyhow::{Context, bail};

@@ -1,6 +1,7 @@
 //! `physnap train …`: the shape prior, the codebook, shape encoding and the denoiser, from flags
 //! to `physnap::train` calls with progress bars and reports.
 
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use anyhow::{Context, bail};

@@ -2,12 +2,7 @@
 //! occupancy of `SDF < 0` against the ground truth on a grid of cell centres, per part and by the
 //! thinnest primitive a part has.
 
-pub use config::*;
-pub use data::*;
-pub use encoding::*;
-pub use checkpoint::*;
-pub use loss::*;
-pub use trainer::*;
+use std::path::Path;
 use std::time::Instant;
 use burn::module::Module;
 use burn::nn::Linear;

@@ -496,6 +496,7 @@ mod tests {
         assert!(
             super::from_bytes(&b[..b.len() - 1])
                 .unwrap_err()
+                .to_string()
                 .contains("truncated")
         );
         assert!(super::from_bytes(b"hello world").is_err());

@@ -1,6 +1,7 @@
 //! Tests of the point-cloud readers and writers on good and hostile input.
 
 use super::*;
+use crate::io::npy::NPY_MAGIC;
 use proptest::prelude::*;
 use std::time::{Duration, Instant};
 

@@ -1,5 +1,6 @@
 //! `physnap eval generative`: validity, MMD / COV / 1-NNA and category accuracy of unguided samples.
 
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -20,6 +21,7 @@ use physnap::io::manifest::{LoadedModels, load_models};
 use physnap::mesh::MeshingOptions;
 use physnap::model::shape_prior::LatentSdfDecoder;
 use super::*;
+use crate::cli::generate::CategoryGuidanceArgs;
 
 #[derive(Args, Debug)]
 pub(crate) struct EvalGenerativeArgs {
@@ -90,35 +92,6 @@ pub(crate) struct EvalGenerativeArgs {
     pub(crate) eta: f64,
 }
 
-/// A progress bar over `total` instantiation-distance pairs, ticked from `distance_matrix`'s
-/// parallel workers.
-pub(crate) struct PairProgress {
-    pub(crate) pb: indicatif::ProgressBar,
-    pub(crate) done: AtomicUsize,
-    pub(crate) total: usize,
-}
-
-impl PairProgress {
-    fn new(total: usize) -> Self {
-        PairProgress {
-            pb: super::progress_bar(total, "ID pairs"),
-            done: AtomicUsize::new(0),
-            total,
-        }
-    }
-
-    fn tick(&self, n: usize) {
-        let d = self.done.fetch_add(n, Ordering::Relaxed) + n;
-        if d.is_multiple_of(64) || d == self.total {
-            self.pb.set_position(d as u64);
-        }
-    }
-
-    fn finish(self) {
-        self.pb.finish_and_clear();
-    }
-}
-
 /// Draw `req.samples` objects for `req` (its category name filled in from the manifest).
 pub(crate) fn sample_set(
     models: &LoadedModels,
@@ -144,77 +117,6 @@ pub(crate) fn sample_set(
             ControlFlow::Continue(())
         },
     )?)
-}
-
-/// One requested category's conditioned samples: how many, how many hit, and the category of
-/// each sample's nearest reference (`(invalid)` for samples that failed validity).
-#[derive(Default)]
-pub(crate) struct CategoryHits {
-    pub(crate) category: String,
-    pub(crate) hits: usize,
-    pub(crate) samples: usize,
-    pub(crate) nearest: std::collections::BTreeMap<String, usize>,
-}
-
-impl CategoryHits {
-    /// One empty row per category, in `cats`' order.
-    fn table(cats: &[String]) -> Vec<CategoryHits> {
-        cats.iter()
-            .map(|c| CategoryHits {
-                category: c.clone(),
-                ..Default::default()
-            })
-            .collect()
-    }
-
-    /// The row of category `c` in a [`CategoryHits::table`] (which lists every category).
-    fn row<'t>(table: &'t mut [CategoryHits], c: &str) -> &'t mut CategoryHits {
-        table
-            .iter_mut()
-            .find(|e| e.category == c)
-            .expect("the table lists every category")
-    }
-
-    /// The categories its items landed nearest to instead of their own, as
-    /// "   nearest instead: Box 2, Table 1" (empty when there were none).
-    fn misses(&self) -> String {
-        let misses: Vec<String> = self
-            .nearest
-            .iter()
-            .filter(|(n, _)| **n != self.category)
-            .map(|(n, k)| format!("{n} {k}"))
-            .collect();
-        if misses.is_empty() {
-            String::new()
-        } else {
-            format!("   nearest instead: {}", misses.join(", "))
-        }
-    }
-
-    /// The leave-one-out table of a labelled set with distance matrix `d`: per category, how
-    /// many of its objects have an object of their own category nearest, and which they have
-    /// instead. Every row is empty when `d` holds fewer than two objects or does not fit
-    /// `labels`.
-    fn leave_one_out(cats: &[String], labels: &[String], d: &[Vec<f64>]) -> Vec<CategoryHits> {
-        let mut t = CategoryHits::table(cats);
-        let nn = physnap::eval::generative::loo_nearest(d).filter(|nn| nn.len() == labels.len());
-        for (i, &j) in nn.iter().flatten().enumerate() {
-            CategoryHits::row(&mut t, &labels[i]).record(&labels[j]);
-        }
-        t
-    }
-
-    fn to_json(&self) -> serde_json::Value {
-        json!({"hits": self.hits, "objects": self.samples, "nearest": self.nearest})
-    }
-
-    fn record(&mut self, nearest: &str) {
-        self.samples += 1;
-        if nearest == self.category {
-            self.hits += 1;
-        }
-        *self.nearest.entry(nearest.to_string()).or_default() += 1;
-    }
 }
 
 pub(crate) fn generative(a: EvalGenerativeArgs) -> anyhow::Result<()> {

@@ -1,5 +1,6 @@
 //! `physnap eval guided`: the paper's Table 1 (E_pc, D_pc, E_pen, E_mob) on test scans, per variant.
 
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use anyhow::{Context, bail};

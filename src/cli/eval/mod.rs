@@ -7,6 +7,7 @@ mod guided;
 mod reconstruction;
 mod shape;
 
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -225,3 +226,110 @@ pub(crate) fn load_any_shape_prior(
     }
     Ok(load_shape_dir(dir, &physnap::model::cpu())?)
 }
+
+/// A progress bar over `total` instantiation-distance pairs, ticked from `distance_matrix`'s
+/// parallel workers.
+pub(crate) struct PairProgress {
+    pub(crate) pb: indicatif::ProgressBar,
+    pub(crate) done: AtomicUsize,
+    pub(crate) total: usize,
+}
+
+impl PairProgress {
+    fn new(total: usize) -> Self {
+        PairProgress {
+            pb: super::progress_bar(total, "ID pairs"),
+            done: AtomicUsize::new(0),
+            total,
+        }
+    }
+
+    fn tick(&self, n: usize) {
+        let d = self.done.fetch_add(n, Ordering::Relaxed) + n;
+        if d.is_multiple_of(64) || d == self.total {
+            self.pb.set_position(d as u64);
+        }
+    }
+
+    fn finish(self) {
+        self.pb.finish_and_clear();
+    }
+}
+
+/// One requested category's conditioned samples: how many, how many hit, and the category of
+/// each sample's nearest reference (`(invalid)` for samples that failed validity).
+#[derive(Default)]
+pub(crate) struct CategoryHits {
+    pub(crate) category: String,
+    pub(crate) hits: usize,
+    pub(crate) samples: usize,
+    pub(crate) nearest: std::collections::BTreeMap<String, usize>,
+}
+
+impl CategoryHits {
+    /// One empty row per category, in `cats`' order.
+    fn table(cats: &[String]) -> Vec<CategoryHits> {
+        cats.iter()
+            .map(|c| CategoryHits {
+                category: c.clone(),
+                ..Default::default()
+            })
+            .collect()
+    }
+
+    /// The row of category `c` in a [`CategoryHits::table`] (which lists every category).
+    fn row<'t>(table: &'t mut [CategoryHits], c: &str) -> &'t mut CategoryHits {
+        table
+            .iter_mut()
+            .find(|e| e.category == c)
+            .expect("the table lists every category")
+    }
+
+    /// The categories its items landed nearest to instead of their own, as
+    /// "   nearest instead: Box 2, Table 1" (empty when there were none).
+    fn misses(&self) -> String {
+        let misses: Vec<String> = self
+            .nearest
+            .iter()
+            .filter(|(n, _)| **n != self.category)
+            .map(|(n, k)| format!("{n} {k}"))
+            .collect();
+        if misses.is_empty() {
+            String::new()
+        } else {
+            format!("   nearest instead: {}", misses.join(", "))
+        }
+    }
+
+    /// The leave-one-out table of a labelled set with distance matrix `d`: per category, how
+    /// many of its objects have an object of their own category nearest, and which they have
+    /// instead. Every row is empty when `d` holds fewer than two objects or does not fit
+    /// `labels`.
+    fn leave_one_out(cats: &[String], labels: &[String], d: &[Vec<f64>]) -> Vec<CategoryHits> {
+        let mut t = CategoryHits::table(cats);
+        let nn = physnap::eval::generative::loo_nearest(d).filter(|nn| nn.len() == labels.len());
+        for (i, &j) in nn.iter().flatten().enumerate() {
+            CategoryHits::row(&mut t, &labels[i]).record(&labels[j]);
+        }
+        t
+    }
+
+    fn to_json(&self) -> serde_json::Value {
+        json!({"hits": self.hits, "objects": self.samples, "nearest": self.nearest})
+    }
+
+    fn record(&mut self, nearest: &str) {
+        self.samples += 1;
+        if nearest == self.category {
+            self.hits += 1;
+        }
+        *self.nearest.entry(nearest.to_string()).or_default() += 1;
+    }
+}
+
+/// Most parts `eval shape` evaluates (each costs a 64³ decode and its ground truth).
+pub(crate) const MAX_SHAPE_PARTS: usize = 5000;
+
+/// Most encoder points `eval shape --surface-points` takes (a part's surface file has 1,024;
+/// more are repeats).
+pub(crate) const MAX_SURFACE_POINTS: usize = 8192;

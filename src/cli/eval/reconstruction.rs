@@ -1,5 +1,6 @@
 //! `physnap eval reconstruction`: test objects through the representation (graph, codes, meshing) against the originals.
 
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -56,13 +57,6 @@ pub(crate) struct EvalReconstructionArgs {
     #[arg(long, env = "PHYSNAP_EVAL_OUT")]
     pub(crate) out: Option<PathBuf>,
 }
-
-/// Most parts `eval shape` evaluates (each costs a 64³ decode and its ground truth).
-pub(crate) const MAX_SHAPE_PARTS: usize = 5000;
-
-/// Most encoder points `eval shape --surface-points` takes (a part's surface file has 1,024;
-/// more are repeats).
-pub(crate) const MAX_SURFACE_POINTS: usize = 8192;
 
 /// `physnap eval reconstruction`: test objects passed through the representation the denoiser
 /// learns (their `graph.npy`, each part's code from the shape prior's encoder, projection,

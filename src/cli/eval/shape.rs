@@ -73,7 +73,8 @@ pub(crate) struct EvalShapeArgs {
 
 /// `physnap eval shape`: IoU of the weights' shape prior on parts of one split.
 pub(crate) fn shape(a: EvalShapeArgs) -> anyhow::Result<()> {
-    use physnap::train::shape::{Encoding, PartIou, ShapeTrainConfig, evaluate_shape_prior};
+    use physnap::eval::shape_iou::{PartIou, evaluate_shape_prior};
+    use physnap::train::shape::{Encoding, ShapeTrainConfig};
     let started = Instant::now();
     if !["train", "val", "test"].contains(&a.split.as_str()) {
         bail!("invalid --split {:?} (must be train, val or test)", a.split);

@@ -347,5 +347,5 @@ pub(crate) fn sharded_loss(
             )
         })
         .collect();
-    super::sum_slices(model, results)
+    crate::train::sum_slices(model, results)
 }

@@ -7,16 +7,14 @@
 //! progress bar from `WatchJob`, and downloads the artefacts with `GetArtifact`, checking their
 //! sha256.
 
-use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use clap::Args;
-use sha2::{Digest, Sha256};
-use tokio_stream::StreamExt as _;
-use tonic::Request;
 use physnap::pointcloud::{Limits, PointCloud};
 use physnap::service::grpc::pb::{self, job_service_client::JobServiceClient};
-
-
+use sha2::{Digest, Sha256};
+use std::path::{Path, PathBuf};
+use tokio_stream::StreamExt as _;
+use tonic::Request;
 
 #[derive(Args, Debug)]
 pub struct ConnArgs {

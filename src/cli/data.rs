@@ -3,20 +3,16 @@
 //! The work itself lives in `physnap::data`; this module only wires flags to it and prints
 //! what happened (histograms, skip reasons, output paths).
 
-use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 use anyhow::{Context, bail};
-use clap::{Args, Parser, Subcommand};
+use clap::{Args, Subcommand};
 use physnap::data::categories::{SYNTH_CATEGORIES, canonical_name};
 use physnap::data::dataset::{ImportOptions, import_dir, load_object_meshes};
 use physnap::data::generate::{SynthOptions, synthesize};
 use physnap::data::partnet::read_object;
 use physnap::data::rng::Rng;
 use physnap::data::scan::{ScanOptions, scan as scan_object};
-use physnap::export::{ExportOptions, export_dir, mesh_parts};
-use physnap::mesh::MeshingOptions;
 use physnap::pointcloud::{Format, PointCloud, write_coloured_ply};
-
+use std::path::{Path, PathBuf};
 
 #[derive(Subcommand, Debug)]
 pub(crate) enum DataCommand {

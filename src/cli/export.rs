@@ -1,11 +1,10 @@
 //! `physnap export`: a hand-written or generated object JSON to GLB + URDF, no model needed.
 
-use std::path::PathBuf;
-use std::process::ExitCode;
 use anyhow::Context;
-use clap::{Args, Parser, Subcommand};
+use clap::Args;
 use physnap::export::{ExportOptions, export_dir, mesh_parts};
 use physnap::mesh::MeshingOptions;
+use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub(crate) struct ExportArgs {

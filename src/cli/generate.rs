@@ -2,29 +2,24 @@
 //! sample and rank them into `ranking.json`. The sampling flags here are shared with
 //! `physnap eval guided`.
 
-use std::ops::ControlFlow;
-use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 use anyhow::{Context, bail};
-use clap::{Args, Parser, Subcommand};
+use clap::Args;
 use physnap::data::categories::category_index;
 use physnap::engine::EngineError;
-use physnap::engine::generate::{GenerateRequest, JointMotion, PartShapes, Retrieval, generate_with as run_generate};
+use physnap::engine::generate::{
+    GenerateRequest, JointMotion, PartShapes, Retrieval, generate_with as run_generate,
+};
 use physnap::engine::guidance::{GuidanceOptions, SdfField};
 use physnap::engine::sample::Sampler;
 use physnap::engine::schedule::Schedule;
 use physnap::eval::guided::metrics as guided_metrics;
-use physnap::export::{ExportOptions, export_dir, mesh_parts};
-use physnap::io::manifest::{Entry, LoadedModels, Manifest, load_models, to_string as manifest_to_string};
+use physnap::export::{ExportOptions, export_dir};
+use physnap::io::manifest::{LoadedModels, load_models};
 use physnap::mesh::MeshingOptions;
-use physnap::model::Compute;
-use physnap::model::denoiser::DenoiserConfig;
 use physnap::model::shape_prior::LatentSdfDecoder;
-use physnap::model::weights::sha256_hex;
 use physnap::pointcloud::{Limits, PointCloud};
-use physnap::train::codebook::{CODEBOOK_WEIGHTS_FILE, CodebookReport, DEFAULT_CHECK_RESOLUTION, build_codebook};
-use physnap::train::diffusion::{DiffusionTrainConfig, load_data, train_diffusion};
-use physnap::train::shape::{DecoderBackward, Encoding, ShapeTrainConfig, encode_shape_dir, load_shape_prior, model_config_of, read_model_config, train_shape, write_atomic};
+use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
 
 #[derive(Args, Debug)]
 pub(crate) struct GenerateArgs {

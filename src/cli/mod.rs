@@ -18,13 +18,13 @@ mod train;
 
 pub(crate) use progress::progress_bar;
 
-use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 use data::DataCommand;
 use eval::EvalCommand;
 use export::ExportArgs;
 use generate::GenerateArgs;
 use render::RenderArgs;
+use std::process::ExitCode;
 use train::TrainCommand;
 
 /// PhysNAP: complete, physically plausible articulated 3D models from partial point clouds.

@@ -1,8 +1,6 @@
 //! Progress for every long command: a bar on a terminal, a log line every `--progress-interval`
 //! seconds otherwise (nohup, CI, containers).
 
-
-
 /// `--progress-interval`, set once in `main`.
 pub(super) static PROGRESS_INTERVAL: std::sync::OnceLock<f64> = std::sync::OnceLock::new();
 

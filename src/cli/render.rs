@@ -1,11 +1,9 @@
 //! `physnap render`: objects drawn to a PNG (one object at rest and at its limits, or a contact sheet).
 
-use std::path::PathBuf;
-use std::process::ExitCode;
 use anyhow::Context;
-use clap::{Args, Parser, Subcommand};
-use physnap::export::{ExportOptions, export_dir, mesh_parts};
+use clap::Args;
 use physnap::mesh::MeshingOptions;
+use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub(crate) struct RenderArgs {

@@ -5,16 +5,14 @@
 //! the tokens redacted; SIGINT/SIGTERM start the graceful drain. `healthcheck` is a tiny HTTP
 //! GET of the admin `/readyz` so container images need no curl.
 
-use std::io::{Read, Write};
-use std::net::{SocketAddr, TcpStream};
-use std::path::PathBuf;
-use std::time::Duration;
 use anyhow::Context;
 use clap::Args;
 use physnap::service::auth::Tenants;
 use physnap::service::server::{ServeConfig, Server};
-
-
+use std::io::{Read, Write};
+use std::net::{SocketAddr, TcpStream};
+use std::path::PathBuf;
+use std::time::Duration;
 
 #[derive(Args, Debug)]
 pub struct ServeArgs {

@@ -1,29 +1,21 @@
 //! `physnap train …`: the shape prior, the codebook, shape encoding and the denoiser, from flags
 //! to `physnap::train` calls with progress bars and reports.
 
-use std::ops::ControlFlow;
-use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 use anyhow::{Context, bail};
-use clap::{Args, Parser, Subcommand};
-use physnap::data::categories::category_index;
-use physnap::engine::EngineError;
-use physnap::engine::generate::{GenerateRequest, JointMotion, PartShapes, Retrieval, generate_with as run_generate};
-use physnap::engine::guidance::{GuidanceOptions, SdfField};
-use physnap::engine::sample::Sampler;
-use physnap::engine::schedule::Schedule;
-use physnap::eval::guided::metrics as guided_metrics;
-use physnap::export::{ExportOptions, export_dir, mesh_parts};
-use physnap::io::manifest::{Entry, LoadedModels, Manifest, load_models, to_string as manifest_to_string};
-use physnap::mesh::MeshingOptions;
+use clap::{Args, Subcommand};
+use physnap::io::manifest::{Entry, Manifest, to_string as manifest_to_string};
 use physnap::model::Compute;
 use physnap::model::denoiser::DenoiserConfig;
-use physnap::model::shape_prior::LatentSdfDecoder;
 use physnap::model::weights::sha256_hex;
-use physnap::pointcloud::{Limits, PointCloud};
-use physnap::train::codebook::{CODEBOOK_WEIGHTS_FILE, CodebookReport, DEFAULT_CHECK_RESOLUTION, build_codebook};
+use physnap::train::codebook::{
+    CODEBOOK_WEIGHTS_FILE, CodebookReport, DEFAULT_CHECK_RESOLUTION, build_codebook,
+};
 use physnap::train::diffusion::{DiffusionTrainConfig, load_data, train_diffusion};
-use physnap::train::shape::{DecoderBackward, Encoding, ShapeTrainConfig, encode_shape_dir, load_shape_prior, model_config_of, read_model_config, train_shape, write_atomic};
+use physnap::train::shape::{
+    DecoderBackward, Encoding, ShapeTrainConfig, encode_shape_dir, load_shape_prior,
+    model_config_of, read_model_config, train_shape, write_atomic,
+};
+use std::path::{Path, PathBuf};
 
 #[derive(Subcommand, Debug)]
 pub(crate) enum TrainCommand {
@@ -438,7 +430,9 @@ pub(crate) fn shape(a: ShapeArgs) -> anyhow::Result<()> {
 
 /// A weights directory's manifest (and its path) and the path of its shape prior, whose sha256
 /// is checked against the manifest's.
-pub(crate) fn manifest_with_shape_prior(weights: &Path) -> anyhow::Result<(Manifest, PathBuf, PathBuf)> {
+pub(crate) fn manifest_with_shape_prior(
+    weights: &Path,
+) -> anyhow::Result<(Manifest, PathBuf, PathBuf)> {
     let path = weights.join("manifest.json");
     let text =
         std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
@@ -819,7 +813,11 @@ pub(crate) fn codebook(a: CodebookArgs) -> anyhow::Result<()> {
 }
 
 /// Build and register the retrieval codebook of `weights` (with a progress bar).
-pub(crate) fn write_codebook(shape: &Path, weights: &Path, check: usize) -> anyhow::Result<CodebookReport> {
+pub(crate) fn write_codebook(
+    shape: &Path,
+    weights: &Path,
+    check: usize,
+) -> anyhow::Result<CodebookReport> {
     let pb = super::progress_bar(0, "codebook");
     let report = build_codebook(shape, weights, check, &mut |done, total| {
         pb.set_length(total as u64);

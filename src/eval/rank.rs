@@ -32,7 +32,10 @@ mod tests {
     fn ascending_with_non_finite_last_and_ties_in_order() {
         let s = [0.3, f64::NAN, 0.1, 0.3, f64::INFINITY, 0.2];
         assert_eq!(rank_order(&s), vec![2, 5, 0, 3, 1, 4]);
-        assert_eq!(ranked(vec!["a", "b", "c"], |x| if *x == "b" { 0.0 } else { 1.0 }), vec!["b", "a", "c"]);
+        assert_eq!(
+            ranked(vec!["a", "b", "c"], |x| if *x == "b" { 0.0 } else { 1.0 }),
+            vec!["b", "a", "c"]
+        );
         assert!(rank_order(&[]).is_empty());
     }
 }

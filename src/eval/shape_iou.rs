@@ -2,26 +2,19 @@
 //! occupancy of `SDF < 0` against the ground truth on a grid of cell centres, per part and by the
 //! thinnest primitive a part has.
 
-use std::path::Path;
-use std::time::Instant;
-use burn::module::Module;
-use burn::nn::Linear;
-use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
-use burn::store::{ModuleSnapshot, SafetensorsStore};
-use burn::tensor::{Device, Tensor, TensorData};
-use rayon::prelude::*;
-use serde_json::{Value, json};
-use crate::train::TrainError;
-use crate::train::shape::*;
-use crate::train::ema::Ema;
-use crate::data::rng::Rng;
-use crate::io::npy;
 use crate::mesh::DOMAIN_HALF;
 use crate::mesh::bvh::MeshBvh;
+use crate::model::cpu;
 use crate::model::host_decoder::HostDecoder;
-use crate::model::shape_prior::{ShapeDecoder, ShapePrior, ShapePriorConfig};
-use crate::model::{Compute, cpu};
+use crate::model::shape_prior::ShapePrior;
 use crate::shape::{AnalyticSdf, PartShape, Sdf};
+use crate::train::TrainError;
+use crate::train::shape::*;
+use burn::module::Module;
+use burn::tensor::{Tensor, TensorData};
+use rayon::prelude::*;
+use serde_json::{Value, json};
+use std::path::Path;
 
 /// One evaluation.
 #[derive(Debug, Clone, PartialEq)]
@@ -71,7 +64,11 @@ pub fn iou_grid(res: usize) -> Vec<[f32; 3]> {
 
 /// Ground-truth occupancy of a part on `grid`: analytic primitives from `object.json` when the
 /// part has them, else the winding number of its normalised mesh `part<k>.obj`.
-pub(crate) fn gt_occupancy(data: &Path, p: &PartRef, grid: &[[f32; 3]]) -> Result<Vec<bool>, TrainError> {
+pub(crate) fn gt_occupancy(
+    data: &Path,
+    p: &PartRef,
+    grid: &[[f32; 3]],
+) -> Result<Vec<bool>, TrainError> {
     let dir = data.join("objects").join(&p.id);
     let obj_path = dir.join("object.json");
     let object = crate::io::object_json::read(&obj_path)

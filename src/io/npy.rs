@@ -23,7 +23,10 @@ pub enum NpyError {
     Malformed(String),
     /// The file ends before `expected_bytes`.
     #[error("truncated: expected at least {expected_bytes} bytes, got {got_bytes}")]
-    Truncated { expected_bytes: u64, got_bytes: usize },
+    Truncated {
+        expected_bytes: u64,
+        got_bytes: usize,
+    },
 }
 
 fn mal(detail: impl Into<String>) -> NpyError {
@@ -49,11 +52,19 @@ impl Dtype {
         Some(match self {
             Dtype::F32 => {
                 let a = *b.first_chunk::<4>()?;
-                if big { f32::from_be_bytes(a) } else { f32::from_le_bytes(a) }
+                if big {
+                    f32::from_be_bytes(a)
+                } else {
+                    f32::from_le_bytes(a)
+                }
             }
             Dtype::F64 => {
                 let a = *b.first_chunk::<8>()?;
-                (if big { f64::from_be_bytes(a) } else { f64::from_le_bytes(a) }) as f32
+                (if big {
+                    f64::from_be_bytes(a)
+                } else {
+                    f64::from_le_bytes(a)
+                }) as f32
             }
         })
     }
@@ -172,15 +183,23 @@ pub fn parse_header(bytes: &[u8]) -> Result<Header, NpyError> {
 
 /// The `rows × cols` elements after `header`, as f32 in C (row-major) order, whatever the file's
 /// order; the caller has checked the shape and bounded `rows`.
-pub fn read_data(bytes: &[u8], header: &Header, rows: usize, cols: usize) -> Result<Vec<f32>, NpyError> {
+pub fn read_data(
+    bytes: &[u8],
+    header: &Header,
+    rows: usize,
+    cols: usize,
+) -> Result<Vec<f32>, NpyError> {
     let total = bytes.len();
     let size = header.dtype.size();
     let truncated = |expected_bytes| NpyError::Truncated {
         expected_bytes,
         got_bytes: total,
     };
-    let end = (header.data_start as u64)
-        .saturating_add((rows as u64).saturating_mul(cols as u64).saturating_mul(size as u64));
+    let end = (header.data_start as u64).saturating_add(
+        (rows as u64)
+            .saturating_mul(cols as u64)
+            .saturating_mul(size as u64),
+    );
     if end > total as u64 {
         return Err(truncated(end));
     }
@@ -188,7 +207,11 @@ pub fn read_data(bytes: &[u8], header: &Header, rows: usize, cols: usize) -> Res
     let mut out = Vec::with_capacity(rows * cols);
     for i in 0..rows {
         for j in 0..cols {
-            let k = if header.fortran_order { j * rows + i } else { i * cols + j };
+            let k = if header.fortran_order {
+                j * rows + i
+            } else {
+                i * cols + j
+            };
             let v = data
                 .get(k * size..)
                 .and_then(|b| header.dtype.decode(b, header.big_endian))

@@ -24,22 +24,19 @@
 
 use std::collections::HashSet;
 
-mod ply;
-mod npy;
 mod json;
+mod npy;
+mod ply;
 #[cfg(test)]
 mod tests;
 
-pub use ply::*;
-pub use npy::*;
 pub(crate) use crate::io::snippet;
-pub use json::*;
+pub(crate) use json::*;
+pub(crate) use npy::*;
+pub use ply::*;
 
-use std::fmt::Write as _;
 use std::fs;
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
 
 /// A point cloud in object coordinates (metres). Invariant after `validate`: 1..=max points, all finite.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -281,7 +278,11 @@ pub(crate) fn mal(format: &'static str, detail: impl Into<String>) -> PointCloud
     }
 }
 
-pub(crate) fn truncated(format: &'static str, expected_bytes: u64, got_bytes: usize) -> PointCloudError {
+pub(crate) fn truncated(
+    format: &'static str,
+    expected_bytes: u64,
+    got_bytes: usize,
+) -> PointCloudError {
     PointCloudError::Truncated {
         format,
         expected_bytes,
@@ -310,7 +311,6 @@ pub(crate) fn check_count(count: u64, limits: &Limits) -> Result<usize, PointClo
     }
     Ok(count)
 }
-
 
 pub(crate) fn atomic_write(path: &Path, bytes: &[u8]) -> Result<(), PointCloudError> {
     crate::io::atomic::write(path, bytes).map_err(|e| PointCloudError::Io {

@@ -4,10 +4,7 @@
 #[allow(unused_imports)]
 use super::*;
 use std::fmt::Write as _;
-use std::fs;
-use std::io::Write as _;
-use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::path::Path;
 
 /// Write a coloured PLY (ascii) of points with per-point RGB, for side-by-side visual checks.
 /// Atomic like [`PointCloud::write`]; `points` and `colours` must have the same length.
@@ -176,7 +173,9 @@ pub(crate) enum Encoding {
     BinaryBe,
 }
 
-pub(crate) fn ply_header<'a>(bytes: &'a [u8]) -> Result<(Encoding, Vec<Element>, Lines<'a>), PointCloudError> {
+pub(crate) fn ply_header<'a>(
+    bytes: &'a [u8],
+) -> Result<(Encoding, Vec<Element>, Lines<'a>), PointCloudError> {
     let mut lines = Lines {
         bytes,
         pos: 0,

@@ -3,6 +3,7 @@
 use super::*;
 use crate::io::npy::NPY_MAGIC;
 use proptest::prelude::*;
+use std::fmt::Write as _;
 use std::time::{Duration, Instant};
 
 const ALL: [Format; 4] = [Format::Ply, Format::PlyAscii, Format::Npy, Format::Json];
@@ -118,8 +119,7 @@ fn read_errors_for_unknown_extension_and_missing_file() {
     let err = PointCloud::read(Path::new("cloud.xyz"), &Limits::default()).unwrap_err();
     assert_eq!(err.error_type(), "unknown_format");
     assert!(err.to_string().contains("cloud.xyz"), "{err}");
-    let err =
-        PointCloud::read(Path::new("/nonexistent/c.ply"), &Limits::default()).unwrap_err();
+    let err = PointCloud::read(Path::new("/nonexistent/c.ply"), &Limits::default()).unwrap_err();
     assert_eq!(err.error_type(), "io");
     assert!(err.to_string().contains("/nonexistent/c.ply"), "{err}");
 }
@@ -286,9 +286,8 @@ fn ply_header_errors_name_the_problem() {
         &["'ply' magic", "plx"],
     );
     expect_err(read(b"", Format::Ply), "malformed", &["'ply' magic"]);
-    let unknown = format!(
-        "ply\nformat binary_middle_endian 1.0\nelement vertex 1\n{XYZ_FLOAT}end_header\n"
-    );
+    let unknown =
+        format!("ply\nformat binary_middle_endian 1.0\nelement vertex 1\n{XYZ_FLOAT}end_header\n");
     expect_err(
         read(unknown.as_bytes(), Format::Ply),
         "malformed",
@@ -312,8 +311,7 @@ fn ply_header_errors_name_the_problem() {
         "malformed",
         &["no 'y' property", "found: x, z"],
     );
-    let bad_count =
-        format!("ply\nformat ascii 1.0\nelement vertex abc\n{XYZ_FLOAT}end_header\n");
+    let bad_count = format!("ply\nformat ascii 1.0\nelement vertex abc\n{XYZ_FLOAT}end_header\n");
     expect_err(
         read(bad_count.as_bytes(), Format::Ply),
         "malformed",
@@ -322,8 +320,7 @@ fn ply_header_errors_name_the_problem() {
             "element vertex count 'abc' is not an integer",
         ],
     );
-    let neg_count =
-        format!("ply\nformat ascii 1.0\nelement vertex -4\n{XYZ_FLOAT}end_header\n");
+    let neg_count = format!("ply\nformat ascii 1.0\nelement vertex -4\n{XYZ_FLOAT}end_header\n");
     expect_err(
         read(neg_count.as_bytes(), Format::Ply),
         "malformed",
@@ -561,7 +558,8 @@ fn hostile_headers_stay_linear() {
         "took {:?}",
         start.elapsed()
     );
-    let dup = "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float x\nend_header\n";
+    let dup =
+        "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float x\nend_header\n";
     expect_err(
         read(dup.as_bytes(), Format::Ply),
         "malformed",

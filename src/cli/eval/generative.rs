@@ -1,27 +1,24 @@
 //! `physnap eval generative`: validity, MMD / COV / 1-NNA and category accuracy of unguided samples.
 
-use std::ops::ControlFlow;
-use std::path::{Path, PathBuf};
-use std::process::ExitCode;
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::time::Instant;
+use super::*;
+use crate::cli::generate::CategoryGuidanceArgs;
 use anyhow::{Context, bail};
-use clap::{Args, Parser, Subcommand};
-use rayon::prelude::*;
-use serde_json::json;
-use crate::cli::progress_bar;
+use clap::Args;
 use physnap::data::categories::category_index;
-use physnap::data::dataset::load_object_meshes;
-use physnap::data::rng::Rng;
 use physnap::engine::generate::{GenerateRequest, Generated, Retrieval, generate as run_generate};
 use physnap::engine::schedule::Schedule;
-use physnap::eval::generative::{IdOptions, MetricOrder, StateClouds, distance_matrix, distribution_metrics, invalid_reason, state_clouds};
-use physnap::export::{ExportOptions, export_dir, mesh_parts};
+use physnap::eval::generative::{
+    IdOptions, MetricOrder, StateClouds, distance_matrix, distribution_metrics, invalid_reason,
+    state_clouds,
+};
 use physnap::io::manifest::{LoadedModels, load_models};
 use physnap::mesh::MeshingOptions;
 use physnap::model::shape_prior::LatentSdfDecoder;
-use super::*;
-use crate::cli::generate::CategoryGuidanceArgs;
+use rayon::prelude::*;
+use serde_json::json;
+use std::ops::ControlFlow;
+use std::path::PathBuf;
+use std::time::Instant;
 
 #[derive(Args, Debug)]
 pub(crate) struct EvalGenerativeArgs {

@@ -1,31 +1,13 @@
 //! `physnap eval guided`: the paper's Table 1 (E_pc, D_pc, E_pen, E_mob) on test scans, per variant.
 
-use std::ops::ControlFlow;
-use std::path::{Path, PathBuf};
-use std::process::ExitCode;
-use anyhow::{Context, bail};
-use clap::{Args, Parser, Subcommand};
-use crate::cli::progress_bar;
 use crate::cli::generate::*;
-use physnap::data::categories::category_index;
-use physnap::engine::EngineError;
-use physnap::engine::generate::{GenerateRequest, JointMotion, PartShapes, Retrieval, generate_with as run_generate};
-use physnap::engine::guidance::{GuidanceOptions, SdfField};
-use physnap::engine::sample::Sampler;
+use anyhow::bail;
+use clap::Args;
 use physnap::engine::schedule::Schedule;
-use physnap::eval::guided::metrics as guided_metrics;
-use physnap::export::{ExportOptions, export_dir, mesh_parts};
-use physnap::io::manifest::{Entry, LoadedModels, Manifest, load_models, to_string as manifest_to_string};
+use physnap::io::manifest::load_models;
 use physnap::mesh::MeshingOptions;
-use physnap::model::Compute;
-use physnap::model::denoiser::DenoiserConfig;
 use physnap::model::shape_prior::LatentSdfDecoder;
-use physnap::model::weights::sha256_hex;
-use physnap::pointcloud::{Limits, PointCloud};
-use physnap::train::codebook::{CODEBOOK_WEIGHTS_FILE, CodebookReport, DEFAULT_CHECK_RESOLUTION, build_codebook};
-use physnap::train::diffusion::{DiffusionTrainConfig, load_data, train_diffusion};
-use physnap::train::shape::{DecoderBackward, Encoding, ShapeTrainConfig, encode_shape_dir, load_shape_prior, model_config_of, read_model_config, train_shape, write_atomic};
-use super::*;
+use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub(crate) struct EvalGuidedArgs {

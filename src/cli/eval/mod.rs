@@ -7,32 +7,22 @@ mod guided;
 mod reconstruction;
 mod shape;
 
-use std::ops::ControlFlow;
-use std::path::{Path, PathBuf};
-use std::process::ExitCode;
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::time::Instant;
+use super::progress_bar;
 use anyhow::{Context, bail};
-use clap::{Args, Parser, Subcommand};
+use clap::Subcommand;
 use denoiser::EvalDenoiserArgs;
 use generative::EvalGenerativeArgs;
 use guided::EvalGuidedArgs;
+use physnap::data::dataset::load_object_meshes;
+use physnap::data::rng::Rng;
+use physnap::eval::generative::{IdOptions, StateClouds, state_clouds};
+use physnap::io::manifest::load_models;
 use rayon::prelude::*;
 use reconstruction::EvalReconstructionArgs;
 use serde_json::json;
 use shape::EvalShapeArgs;
-use physnap::data::categories::category_index;
-use physnap::data::dataset::load_object_meshes;
-use physnap::data::rng::Rng;
-use physnap::engine::generate::{GenerateRequest, Generated, Retrieval, generate as run_generate};
-use physnap::engine::schedule::Schedule;
-use physnap::eval::generative::{IdOptions, MetricOrder, StateClouds, distance_matrix, distribution_metrics, invalid_reason, state_clouds};
-use physnap::export::{ExportOptions, export_dir, mesh_parts};
-use physnap::io::manifest::{LoadedModels, load_models};
-use physnap::mesh::MeshingOptions;
-use physnap::model::shape_prior::LatentSdfDecoder;
-use super::progress_bar;
-
+use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 #[derive(Subcommand, Debug)]
 pub(crate) enum EvalCommand {

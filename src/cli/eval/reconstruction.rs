@@ -1,26 +1,15 @@
 //! `physnap eval reconstruction`: test objects through the representation (graph, codes, meshing) against the originals.
 
-use std::ops::ControlFlow;
-use std::path::{Path, PathBuf};
-use std::process::ExitCode;
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::time::Instant;
+use super::*;
 use anyhow::{Context, bail};
-use clap::{Args, Parser, Subcommand};
-use rayon::prelude::*;
-use serde_json::json;
-use crate::cli::progress_bar;
-use physnap::data::categories::category_index;
+use clap::Args;
 use physnap::data::dataset::load_object_meshes;
-use physnap::data::rng::Rng;
-use physnap::engine::generate::{GenerateRequest, Generated, Retrieval, generate as run_generate};
-use physnap::engine::schedule::Schedule;
-use physnap::eval::generative::{IdOptions, MetricOrder, StateClouds, distance_matrix, distribution_metrics, invalid_reason, state_clouds};
-use physnap::export::{ExportOptions, export_dir, mesh_parts};
-use physnap::io::manifest::{LoadedModels, load_models};
+use physnap::eval::generative::{IdOptions, StateClouds, distance_matrix, state_clouds};
 use physnap::mesh::MeshingOptions;
 use physnap::model::shape_prior::LatentSdfDecoder;
-use super::*;
+use serde_json::json;
+use std::path::PathBuf;
+use std::time::Instant;
 
 #[derive(Args, Debug)]
 pub(crate) struct EvalReconstructionArgs {

@@ -1,25 +1,11 @@
 //! `physnap eval shape`: the shape prior's IoU per part and by kind.
 
-use std::path::{Path, PathBuf};
-use std::process::ExitCode;
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::time::Instant;
-use anyhow::{Context, bail};
-use clap::{Args, Parser, Subcommand};
-use rayon::prelude::*;
-use serde_json::json;
-use crate::cli::progress_bar;
-use physnap::data::categories::category_index;
-use physnap::data::dataset::load_object_meshes;
-use physnap::data::rng::Rng;
-use physnap::engine::generate::{GenerateRequest, Generated, Retrieval, generate as run_generate};
-use physnap::engine::schedule::Schedule;
-use physnap::eval::generative::{IdOptions, MetricOrder, StateClouds, distance_matrix, distribution_metrics, invalid_reason, state_clouds};
-use physnap::export::{ExportOptions, export_dir, mesh_parts};
-use physnap::io::manifest::{LoadedModels, load_models};
-use physnap::mesh::MeshingOptions;
-use physnap::model::shape_prior::LatentSdfDecoder;
 use super::*;
+use anyhow::bail;
+use clap::Args;
+use serde_json::json;
+use std::path::PathBuf;
+use std::time::Instant;
 
 #[derive(Args, Debug)]
 pub(crate) struct EvalShapeArgs {

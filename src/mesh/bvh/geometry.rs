@@ -4,7 +4,6 @@
 #[allow(unused_imports)]
 use super::*;
 
-
 /// A ray prepared for the watertight triangle test: the direction's dominant axis becomes z
 /// and a shear maps the direction onto +z, so every triangle test is a 2D point-in-triangle
 /// test at the origin.

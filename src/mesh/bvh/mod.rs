@@ -55,16 +55,14 @@
 use rayon::prelude::*;
 
 mod build;
-mod winding;
 mod geometry;
 #[cfg(test)]
 mod tests;
+mod winding;
 
-pub use build::*;
-pub use winding::*;
-pub use geometry::*;
-
-
+pub(crate) use build::*;
+pub(crate) use geometry::*;
+pub(crate) use winding::*;
 
 pub(crate) type V3 = [f32; 3];
 

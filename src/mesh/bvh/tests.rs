@@ -225,9 +225,8 @@ fn cube_rays_from_outside_hit_the_right_face_at_the_right_t() {
             let tri = CUBE.0.1[h.triangle as usize].map(|i| CUBE.0.0[i as usize]);
             let [u, v] = h.uv;
             assert!(u >= 0.0 && v >= 0.0 && u + v <= 1.0);
-            let from_uv: V3 = std::array::from_fn(|k| {
-                (1.0 - u - v) * tri[0][k] + u * tri[1][k] + v * tri[2][k]
-            });
+            let from_uv: V3 =
+                std::array::from_fn(|k| (1.0 - u - v) * tri[0][k] + u * tri[1][k] + v * tri[2][k]);
             assert_close(p, from_uv, 1e-5);
             assert!(b.ray_occluded(o, d, 0.0, f32::INFINITY));
         }

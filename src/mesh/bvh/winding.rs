@@ -4,7 +4,6 @@
 #[allow(unused_imports)]
 use super::*;
 
-
 /// The f64 nearest to `x` that is an f32: expansion centres are stored as f32, so moments and
 /// radii are taken about the rounded centre.
 pub(crate) fn round_to_f32(x: f64) -> f64 {

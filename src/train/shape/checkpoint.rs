@@ -3,24 +3,15 @@
 
 #[allow(unused_imports)]
 use super::*;
-use std::time::Instant;
-use burn::module::Module;
-use burn::nn::Linear;
-use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
-use burn::store::{ModuleSnapshot, SafetensorsStore};
-use burn::tensor::{Device, Tensor, TensorData};
-use rayon::prelude::*;
-use serde_json::{Value, json};
-use crate::train::TrainError;
-use crate::train::ema::Ema;
 use crate::data::rng::Rng;
 use crate::io::npy;
-use crate::mesh::DOMAIN_HALF;
-use crate::mesh::bvh::MeshBvh;
 use crate::model::host_decoder::HostDecoder;
-use crate::model::shape_prior::{ShapeDecoder, ShapePrior, ShapePriorConfig};
-use crate::model::{Compute, cpu};
-use crate::shape::{AnalyticSdf, PartShape, Sdf};
+use crate::model::shape_prior::{ShapePrior, ShapePriorConfig};
+use crate::train::TrainError;
+use burn::module::Module;
+use burn::store::{ModuleSnapshot, SafetensorsStore};
+use burn::tensor::Device;
+use serde_json::{Value, json};
 
 /// Save `model`'s weights (f32 safetensors; keys are the module paths, e.g.
 /// `decoder.blocks.0.fc_0.weight`, Linear weights stored `[in, out]` as burn holds them).
@@ -365,7 +356,10 @@ pub(crate) fn check_checkpoint_weights(
 /// Read `out/shape_checkpoint.json`, refusing one written by a different run (a config field of
 /// [`RESUME_FIELDS`] differs: named with both values) or whose weights file is not the one it
 /// was written with.
-pub(crate) fn read_checkpoint(out: &Path, cfg: &ShapeTrainConfig) -> Result<Checkpoint, TrainError> {
+pub(crate) fn read_checkpoint(
+    out: &Path,
+    cfg: &ShapeTrainConfig,
+) -> Result<Checkpoint, TrainError> {
     let path = out.join(CHECKPOINT_FILE);
     let text = std::fs::read_to_string(&path).map_err(TrainError::io(&path))?;
     let v: Value =

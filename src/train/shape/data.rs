@@ -3,24 +3,11 @@
 
 #[allow(unused_imports)]
 use super::*;
-use std::time::Instant;
-use burn::module::Module;
-use burn::nn::Linear;
-use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
-use burn::store::{ModuleSnapshot, SafetensorsStore};
-use burn::tensor::{Device, Tensor, TensorData};
-use rayon::prelude::*;
-use serde_json::{Value, json};
-use crate::train::TrainError;
-use crate::train::ema::Ema;
 use crate::data::rng::Rng;
 use crate::io::npy;
-use crate::mesh::DOMAIN_HALF;
-use crate::mesh::bvh::MeshBvh;
-use crate::model::host_decoder::HostDecoder;
-use crate::model::shape_prior::{ShapeDecoder, ShapePrior, ShapePriorConfig};
-use crate::model::{Compute, cpu};
-use crate::shape::{AnalyticSdf, PartShape, Sdf};
+use crate::train::TrainError;
+use burn::tensor::Tensor;
+use serde_json::{Value, json};
 
 /// One part of the data set.
 #[derive(Debug, Clone)]
@@ -292,7 +279,11 @@ impl FixedCodes {
     /// The rows of `dir`'s codebook for `train`'s parts, matched by key (`<object>_<part>`);
     /// refuses codes of another width, a part without a code (a codebook of another data set)
     /// and an encoding it cannot read, naming the file.
-    pub(crate) fn read(dir: &Path, latent: usize, train: &[&PartRef]) -> Result<FixedCodes, TrainError> {
+    pub(crate) fn read(
+        dir: &Path,
+        latent: usize,
+        train: &[&PartRef],
+    ) -> Result<FixedCodes, TrainError> {
         let book = read_codebook(dir, latent)?;
         let index_path = dir.join(CODEBOOK_INDEX_FILE);
         let encoding = Encoding::of_report(&json!({ "encoding": book.encoding }), &index_path)?;

@@ -3,24 +3,13 @@
 
 #[allow(unused_imports)]
 use super::*;
-use std::time::Instant;
+use crate::model::host_decoder::HostDecoder;
+use crate::model::shape_prior::{ShapeDecoder, ShapePrior};
 use burn::module::Module;
 use burn::nn::Linear;
-use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
-use burn::store::{ModuleSnapshot, SafetensorsStore};
+use burn::optim::GradientsParams;
 use burn::tensor::{Device, Tensor, TensorData};
 use rayon::prelude::*;
-use serde_json::{Value, json};
-use crate::train::TrainError;
-use crate::train::ema::Ema;
-use crate::data::rng::Rng;
-use crate::io::npy;
-use crate::mesh::DOMAIN_HALF;
-use crate::mesh::bvh::MeshBvh;
-use crate::model::host_decoder::HostDecoder;
-use crate::model::shape_prior::{ShapeDecoder, ShapePrior, ShapePriorConfig};
-use crate::model::{Compute, cpu};
-use crate::shape::{AnalyticSdf, PartShape, Sdf};
 
 /// f̂' − clamp(f, −δ, δ), where f̂' clamps the prediction only on the side where the target was
 /// clamped: beyond ±δ on the target's side costs nothing, but a prediction on the wrong side

@@ -43,42 +43,25 @@
 
 use std::path::{Path, PathBuf};
 
+mod checkpoint;
 mod config;
 mod data;
 mod encoding;
-mod checkpoint;
 mod loss;
-mod trainer;
 #[cfg(test)]
 mod tests;
+mod trainer;
 
-pub use config::*;
-pub use data::*;
-pub use encoding::*;
-pub use checkpoint::*;
-pub use loss::*;
-pub use trainer::*;
 #[allow(unused_imports)]
 use crate::eval::shape_iou::*;
+pub use checkpoint::*;
+pub use config::*;
+pub(crate) use data::*;
+pub use encoding::*;
+pub(crate) use loss::*;
+pub use trainer::*;
 
-use std::time::Instant;
-use burn::module::Module;
-use burn::nn::Linear;
-use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
-use burn::store::{ModuleSnapshot, SafetensorsStore};
-use burn::tensor::{Device, Tensor, TensorData};
-use rayon::prelude::*;
-use serde_json::{Value, json};
 use super::TrainError;
-use super::ema::Ema;
-use crate::data::rng::Rng;
-use crate::io::npy;
-use crate::mesh::DOMAIN_HALF;
-use crate::mesh::bvh::MeshBvh;
-use crate::model::host_decoder::HostDecoder;
-use crate::model::shape_prior::{ShapeDecoder, ShapePrior, ShapePriorConfig};
-use crate::model::{Compute, cpu};
-use crate::shape::{AnalyticSdf, PartShape, Sdf};
 
 /// Weights file name in the output directory.
 pub const WEIGHTS_FILE: &str = "shape_prior.safetensors";

@@ -1,6 +1,16 @@
 //! Tests of the shape prior's training, encoding and evaluation.
 
 use super::*;
+use crate::data::rng::Rng;
+use crate::io::npy;
+use crate::model::shape_prior::{ShapePrior, ShapePriorConfig};
+use crate::model::{Compute, cpu};
+use crate::shape::PartShape;
+use burn::module::Module;
+use burn::tensor::{Tensor, TensorData};
+use serde_json::{Value, json};
+use std::time::Instant;
+
 use crate::data::categories::SYNTH_CATEGORIES;
 use crate::data::dataset::{ImportOptions, import_dir};
 use crate::data::generate::{SynthOptions, synthesize};
@@ -105,8 +115,7 @@ fn tiny_training_lowers_the_loss_and_writes_everything() {
 
     // The codebook's first row is what the saved encoder gives for that part.
     let model = load_shape_prior(&out.join(WEIGHTS_FILE), &cfg.model, &cpu()).unwrap();
-    let (_, surf) =
-        read_rows(&parts[0].file(&data.path().join("train"), "surface"), 3).unwrap();
+    let (_, surf) = read_rows(&parts[0].file(&data.path().join("train"), "surface"), 3).unwrap();
     let z = to_vec(model.encoder.encode(Tensor::from_data(
         TensorData::new(first_points(&surf, 64), [1, 64, 3]),
         &cpu(),
@@ -287,8 +296,7 @@ fn freeze_encoder_trains_the_decoder_and_keeps_every_code() {
 fn codes_from_trains_the_decoder_on_the_given_codes() {
     let (data, train, short, base) = ten_step_prior(14);
     let base_report: Value =
-        serde_json::from_str(&std::fs::read_to_string(base.join(REPORT_FILE)).unwrap())
-            .unwrap();
+        serde_json::from_str(&std::fs::read_to_string(base.join(REPORT_FILE)).unwrap()).unwrap();
     let fit = Encoding {
         views: 2,
         fit_steps: 5,
@@ -362,10 +370,9 @@ fn codes_from_trains_the_decoder_on_the_given_codes() {
         );
     }
     // A training part missing from the codebook is named.
-    let mut index: Value = serde_json::from_str(
-        &std::fs::read_to_string(codes.join(CODEBOOK_INDEX_FILE)).unwrap(),
-    )
-    .unwrap();
+    let mut index: Value =
+        serde_json::from_str(&std::fs::read_to_string(codes.join(CODEBOOK_INDEX_FILE)).unwrap())
+            .unwrap();
     let key = format!("{}_{}", refs[0].id, refs[0].k);
     let row = index["keys"]
         .as_array()
@@ -618,8 +625,7 @@ fn stopped_run_resumes_from_its_checkpoint() {
     // A checkpoint written before the wrong-side term existed has no such field: it ran
     // without the term and resumes as such.
     let ckpt = out.join(CHECKPOINT_FILE);
-    let mut doc: Value =
-        serde_json::from_str(&std::fs::read_to_string(&ckpt).unwrap()).unwrap();
+    let mut doc: Value = serde_json::from_str(&std::fs::read_to_string(&ckpt).unwrap()).unwrap();
     assert!(
         doc["config"]
             .as_object_mut()
@@ -841,8 +847,7 @@ fn encodings_average_views_fit_per_part_and_are_recorded() {
     )
     .unwrap();
     let doc: Value =
-        serde_json::from_str(&std::fs::read_to_string(again.join(REPORT_FILE)).unwrap())
-            .unwrap();
+        serde_json::from_str(&std::fs::read_to_string(again.join(REPORT_FILE)).unwrap()).unwrap();
     assert!(doc["encoding"].is_null(), "{doc}");
     for (bad, field, limit, value) in [
         (
@@ -1196,8 +1201,8 @@ fn host_decoder_backward_equals_burn_autodiff() {
             ..ShapeTrainConfig::default()
         };
         let device = crate::model::cpu_autodiff();
-        let model = ShapePrior::with_seed(&cfg.model, seed, &device)
-            .map(&mut Randomise(Rng::new(seed)));
+        let model =
+            ShapePrior::with_seed(&cfg.model, seed, &device).map(&mut Randomise(Rng::new(seed)));
         let mut rng = Rng::new(seed + 10);
         let mut draw = |n: usize, lo: f64, hi: f64| -> Vec<f32> {
             (0..n).map(|_| rng.range(lo, hi) as f32).collect()
@@ -1477,10 +1482,7 @@ fn train_from_env() {
                 p.lr,
                 p.elapsed_s,
                 p.val_iou
-                    .map(|i| format!(
-                        " val_iou {i:.4} val_l1 {:.5}",
-                        p.val_l1.unwrap_or(f64::NAN)
-                    ))
+                    .map(|i| format!(" val_iou {i:.4} val_l1 {:.5}", p.val_l1.unwrap_or(f64::NAN)))
                     .unwrap_or_default()
             );
         }

@@ -3,24 +3,17 @@
 
 #[allow(unused_imports)]
 use super::*;
-use std::time::Instant;
-use burn::module::Module;
-use burn::nn::Linear;
-use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
-use burn::store::{ModuleSnapshot, SafetensorsStore};
-use burn::tensor::{Device, Tensor, TensorData};
-use rayon::prelude::*;
-use serde_json::{Value, json};
+use crate::data::rng::Rng;
+use crate::model::shape_prior::ShapePrior;
+use crate::model::{Compute, cpu};
 use crate::train::TrainError;
 use crate::train::ema::Ema;
-use crate::data::rng::Rng;
-use crate::io::npy;
-use crate::mesh::DOMAIN_HALF;
-use crate::mesh::bvh::MeshBvh;
-use crate::model::host_decoder::HostDecoder;
-use crate::model::shape_prior::{ShapeDecoder, ShapePrior, ShapePriorConfig};
-use crate::model::{Compute, cpu};
-use crate::shape::{AnalyticSdf, PartShape, Sdf};
+use burn::module::Module;
+use burn::optim::{AdamConfig, ModuleOptimizer};
+use burn::tensor::Device;
+use rayon::prelude::*;
+use serde_json::json;
+use std::time::Instant;
 
 /// The optimisation state of a run: model, Adam, batch sampler.
 pub(crate) struct Trainer<'a> {

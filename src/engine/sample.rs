@@ -43,6 +43,24 @@ pub enum Sampler {
     },
 }
 
+impl Sampler {
+    /// Wire / flag name: `ddpm` or `ddim`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Sampler::Ddpm => "ddpm",
+            Sampler::Ddim { .. } => "ddim",
+        }
+    }
+
+    /// DDIM's η; 0 for DDPM.
+    pub fn eta(self) -> f64 {
+        match self {
+            Sampler::Ddpm => 0.0,
+            Sampler::Ddim { eta } => eta,
+        }
+    }
+}
+
 /// The reverse steps physnap's CLI and service use by default: DDIM (η = 0) over 200 of the
 /// 1000 schedule steps, the last 100 of them guided (n_g = 500 of 1000, scaled). The paper's
 /// 1000-step DDPM with n_g = 500 takes minutes per guided sample on 2 cores; EVALUATION.md

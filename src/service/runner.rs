@@ -243,11 +243,11 @@ fn ranking_json(spec: &JobSpec, guidance: &Option<GuidanceOptions>, rows: &[Rank
             "max_step": g.max_step, "refine_steps": g.refine_steps,
             "refine_physics_steps": g.refine_physics_steps,
         })),
-        "sampler": spec.sampler, "eta": spec.eta, "steps": spec.steps,
-        "retrieval": spec.retrieval,
+        "sampler": spec.sampler.name(), "eta": spec.sampler.eta(), "steps": spec.steps,
+        "retrieval": spec.retrieval.as_str(),
         "category_guidance": spec.category_guidance,
         "category_guidance_below": spec.category_guidance_below,
-        "joint_motion": spec.joint_motion,
+        "joint_motion": spec.joint_motion.as_str(),
         "best": best,
         "samples": rows.iter().enumerate().map(|(rank, r)| serde_json::json!({
             "rank": rank + 1,
@@ -286,12 +286,12 @@ pub fn run_job(
         },
         preview_every: spec.preview_every as usize,
         guidance: guidance.clone(),
-        sampler: spec.engine_sampler(),
+        sampler: spec.sampler,
         steps: spec.steps as usize,
-        retrieval: spec.engine_retrieval(),
+        retrieval: spec.retrieval,
         category_guidance: spec.category_guidance,
         category_guidance_below: Some(spec.category_guidance_below as usize),
-        joint_motion: spec.engine_joint_motion(),
+        joint_motion: spec.joint_motion,
     };
     let decoder = LatentSdfDecoder::new(&m.shape_prior.decoder);
     let started = Instant::now();

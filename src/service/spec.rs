@@ -170,10 +170,8 @@ pub struct JobSpec {
     /// Physics-only refinement steps after the refinement steps (ℓ_pen and ℓ_mob alone, part
     /// boxes only; 0: off). They run only when `w_pen` or `w_mob` is > 0.
     pub refine_physics_steps: u32,
-    /// Sampler name (`ddpm` or `ddim`).
-    pub sampler: String,
-    /// DDIM η (0 for `ddpm`).
-    pub eta: f64,
+    /// The reverse-step rule (DDIM carries its η).
+    pub sampler: Sampler,
     /// Reverse steps (1..=schedule).
     pub steps: u32,
     /// Seed of sample 0 (always materialised).
@@ -186,17 +184,16 @@ pub struct JobSpec {
     pub preview_every: u32,
     /// Marching-cubes resolution.
     pub resolution: u32,
-    /// Codebook retrieval of part shapes: `off`, `empty`, `all` or `category` (`auto` is
-    /// resolved).
-    pub retrieval: String,
+    /// Codebook retrieval of part shapes (`auto` resolved).
+    pub retrieval: Retrieval,
     /// Classifier-free category guidance w (0 without a category).
     pub category_guidance: f64,
     /// The guidance applies in steps with diffusion time t below this (1000: every step;
     /// default 1000 for a guided job, 500 for plain sampling).
     pub category_guidance_below: u32,
-    /// `screw` (NAP: each joint keeps its rotation and translation ranges) or `dominant` (each
+    /// `Screw` (NAP: each joint keeps its rotation and translation ranges) or `Dominant` (each
     /// joint keeps only the wider one, so exported joints are plain revolute / prismatic).
-    pub joint_motion: String,
+    pub joint_motion: JointMotion,
 }
 
 /// Largest τ accepted (the engine's limit).
@@ -206,25 +203,6 @@ impl JobSpec {
     /// Whether any guidance weight is positive (otherwise the job samples unguided).
     pub fn guided(&self) -> bool {
         weights_active(self.w_pc, self.w_pen, self.w_mob)
-    }
-
-    /// The engine's joint motion (an unknown name, impossible after [`validate`], is NAP's).
-    pub fn engine_joint_motion(&self) -> JointMotion {
-        JointMotion::parse(&self.joint_motion).unwrap_or_default()
-    }
-
-    /// The engine's retrieval mode (an unknown name, impossible after [`validate`], is `Off`).
-    pub fn engine_retrieval(&self) -> Retrieval {
-        Retrieval::parse(&self.retrieval).unwrap_or_default()
-    }
-
-    /// The engine's sampler.
-    pub fn engine_sampler(&self) -> Sampler {
-        if self.sampler == SAMPLER_DDIM {
-            Sampler::Ddim { eta: self.eta }
-        } else {
-            Sampler::Ddpm
-        }
     }
 
     /// n_g in the engine's form: guidance applies for diffusion time t < this. The reverse
@@ -431,6 +409,11 @@ pub fn validate(
         }
         Some(e) => e,
     };
+    let sampler = if sampler == SAMPLER_DDIM {
+        Sampler::Ddim { eta }
+    } else {
+        Sampler::Ddpm
+    };
     let steps = input
         .steps
         .unwrap_or((DEFAULT_STEPS as u32).min(caps.schedule_steps));
@@ -531,7 +514,7 @@ pub fn validate(
         ));
     }
     let retrieval = match input.retrieval.as_deref().filter(|r| !r.is_empty()) {
-        None | Some("auto") => Retrieval::auto(caps.codebook).as_str().to_string(),
+        None | Some("auto") => Retrieval::auto(caps.codebook),
         Some(r) => match Retrieval::parse(r) {
             None => {
                 return Err(violation(
@@ -540,7 +523,7 @@ pub fn validate(
                     format!("{r:?}"),
                 ));
             }
-            Some(Retrieval::Off) => r.to_string(),
+            Some(Retrieval::Off) => Retrieval::Off,
             Some(_) if !caps.codebook => {
                 return Err(violation(
                     "retrieval",
@@ -575,21 +558,23 @@ pub fn validate(
                         format!("{r:?} with category {name}"),
                     ));
                 }
-                Some(_) => r.to_string(),
+                Some(_) => Retrieval::Category,
             },
-            Some(_) => r.to_string(),
+            Some(mode) => mode,
         },
     };
     let joint_motion = match input.joint_motion.as_deref().filter(|m| !m.is_empty()) {
-        None => DEFAULT_JOINT_MOTION.as_str().to_string(),
-        Some(m) if JointMotion::parse(m).is_some() => m.to_string(),
-        Some(m) => {
-            return Err(violation(
-                "joint_motion",
-                "\"screw\" or \"dominant\"",
-                format!("{m:?}"),
-            ));
-        }
+        None => DEFAULT_JOINT_MOTION,
+        Some(m) => match JointMotion::parse(m) {
+            Some(motion) => motion,
+            None => {
+                return Err(violation(
+                    "joint_motion",
+                    "\"screw\" or \"dominant\"",
+                    format!("{m:?}"),
+                ));
+            }
+        },
     };
     // Classifier-free category guidance: with a category, the default for a scan-guided or a
     // plain job (0 and 2); 0 without one.
@@ -634,7 +619,6 @@ pub fn validate(
         refine_steps,
         refine_physics_steps,
         sampler,
-        eta,
         steps,
         seed: input.seed.unwrap_or(random_seed),
         samples,
@@ -727,8 +711,11 @@ mod tests {
         // physnap's fast default: DDIM over 200 steps, the last 100 guided (t < 500, as the
         // paper's n_g = 500 of 1000), with the gradient clamp.
         assert_eq!((s.seed, s.samples, s.steps, s.n_g), (77, 1, 200, 100));
-        assert_eq!((s.tau, s.sampler.as_str(), s.eta), (1000.0, "ddim", 0.0));
-        assert_eq!(s.engine_sampler(), Sampler::Ddim { eta: 0.0 });
+        assert_eq!(
+            (s.tau, s.sampler.name(), s.sampler.eta()),
+            (1000.0, "ddim", 0.0)
+        );
+        assert_eq!(s.sampler, Sampler::Ddim { eta: 0.0 });
         assert_eq!(s.guidance_max_step, Some(DEFAULT_MAX_STEP));
         assert_eq!(s.refine_steps, 30);
         assert_eq!(s.refine_physics_steps, 0);
@@ -748,10 +735,7 @@ mod tests {
             ..input
         };
         let s = validate(&paper, &caps(), &Limits::default(), 77).unwrap();
-        assert_eq!(
-            (s.steps, s.n_g, s.engine_sampler()),
-            (1000, 500, Sampler::Ddpm)
-        );
+        assert_eq!((s.steps, s.n_g, s.sampler), (1000, 500, Sampler::Ddpm));
         assert_eq!(s.guidance_threshold(1000), 500);
     }
 
@@ -768,11 +752,11 @@ mod tests {
         };
         let l = Limits::default();
         let run = |r, c: &ModelCaps| validate(&input(r), c, &l, 0).map(|s| s.retrieval);
-        assert_eq!(run(None, &caps()).unwrap(), "empty");
-        assert_eq!(run(Some("auto"), &caps()).unwrap(), "empty");
-        assert_eq!(run(Some("all"), &caps()).unwrap(), "all");
-        assert_eq!(run(None, &without).unwrap(), "off");
-        assert_eq!(run(Some("off"), &without).unwrap(), "off");
+        assert_eq!(run(None, &caps()).unwrap().as_str(), "empty");
+        assert_eq!(run(Some("auto"), &caps()).unwrap().as_str(), "empty");
+        assert_eq!(run(Some("all"), &caps()).unwrap().as_str(), "all");
+        assert_eq!(run(None, &without).unwrap().as_str(), "off");
+        assert_eq!(run(Some("off"), &without).unwrap().as_str(), "off");
         let v = run(Some("all"), &without).unwrap_err();
         assert_eq!(
             (v.field.as_str(), v.value.as_str()),
@@ -780,14 +764,14 @@ mod tests {
         );
         assert!(v.limit.contains("no codebook"), "{v}");
         let s = validate(&input(Some("all")), &caps(), &l, 0).unwrap();
-        assert_eq!(s.engine_retrieval(), Retrieval::All);
+        assert_eq!(s.retrieval, Retrieval::All);
         // "category" needs a category that has codes in the codebook.
         let with = |r: &str, c: Option<&str>| JobInput {
             category: c.map(str::to_string),
             ..input(Some(r))
         };
         let s = validate(&with("category", Some("Window")), &caps(), &l, 0).unwrap();
-        assert_eq!(s.engine_retrieval(), Retrieval::Category);
+        assert_eq!(s.retrieval, Retrieval::Category);
         let v = validate(&with("category", None), &caps(), &l, 0).unwrap_err();
         assert_eq!(
             (v.field.as_str(), v.value.as_str()),
@@ -816,20 +800,11 @@ mod tests {
         };
         let l = Limits::default();
         let run = |m| validate(&input(m), &caps(), &l, 0);
-        assert_eq!(
-            run(None).unwrap().joint_motion,
-            DEFAULT_JOINT_MOTION.as_str()
-        );
-        assert_eq!(
-            run(Some("")).unwrap().joint_motion,
-            DEFAULT_JOINT_MOTION.as_str()
-        );
+        assert_eq!(run(None).unwrap().joint_motion, DEFAULT_JOINT_MOTION);
+        assert_eq!(run(Some("")).unwrap().joint_motion, DEFAULT_JOINT_MOTION);
         let s = run(Some("dominant")).unwrap();
-        assert_eq!(s.engine_joint_motion(), JointMotion::Dominant);
-        assert_eq!(
-            run(Some("screw")).unwrap().engine_joint_motion(),
-            JointMotion::Screw
-        );
+        assert_eq!(s.joint_motion, JointMotion::Dominant);
+        assert_eq!(run(Some("screw")).unwrap().joint_motion, JointMotion::Screw);
         let v = run(Some("revolute")).unwrap_err();
         assert_eq!(
             (v.field.as_str(), v.limit.as_str(), v.value.as_str()),
@@ -880,7 +855,7 @@ mod tests {
         };
         let raw = validate(&raw, &caps(), &Limits::default(), 0).unwrap();
         assert_eq!(raw.guidance_max_step, None);
-        assert_eq!(s.engine_sampler(), Sampler::Ddim { eta: 0.5 });
+        assert_eq!(s.sampler, Sampler::Ddim { eta: 0.5 });
         // Exactly the last n_g of the strided times fall below the threshold, and that is
         // the CLI's `--guidance-steps 500` for the default.
         for n_g in [0, 1, 7, 10, 20] {

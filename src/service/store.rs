@@ -16,6 +16,8 @@ use rusqlite::{Connection, OptionalExtension, params};
 use serde::{Deserialize, Serialize};
 
 use super::spec::JobSpec;
+use crate::engine::generate::{JointMotion, Retrieval};
+use crate::engine::sample::Sampler;
 
 /// Errors of the store layer.
 #[derive(Debug, thiserror::Error)]
@@ -214,18 +216,18 @@ fn spec_to_row(s: &JobSpec) -> (String, Vec<u8>) {
         guidance_max_step: s.guidance_max_step,
         refine_steps: s.refine_steps,
         refine_physics_steps: s.refine_physics_steps,
-        sampler: s.sampler.clone(),
-        eta: s.eta,
+        sampler: s.sampler.name().to_string(),
+        eta: s.sampler.eta(),
         steps: s.steps,
         seed: s.seed,
         samples: s.samples,
         deadline_seconds: s.deadline_seconds,
         preview_every: s.preview_every,
         resolution: s.resolution,
-        retrieval: s.retrieval.clone(),
+        retrieval: s.retrieval.as_str().to_string(),
         category_guidance: s.category_guidance,
         category_guidance_below: s.category_guidance_below,
-        joint_motion: s.joint_motion.clone(),
+        joint_motion: s.joint_motion.as_str().to_string(),
     };
     let mut blob = Vec::with_capacity(s.points.len() * 12);
     for p in &s.points {
@@ -247,6 +249,15 @@ fn spec_from_row(id: &str, json: &str, blob: &[u8]) -> Result<JobSpec, StoreErro
         return Err(corrupt(format!("points blob of {} bytes", blob.len())));
     }
     let f = |c: &[u8]| f32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+    let sampler = match d.sampler.as_str() {
+        "ddpm" => Sampler::Ddpm,
+        "ddim" => Sampler::Ddim { eta: d.eta },
+        other => return Err(corrupt(format!("unknown sampler {other:?}"))),
+    };
+    let retrieval = Retrieval::parse(&d.retrieval)
+        .ok_or_else(|| corrupt(format!("unknown retrieval {:?}", d.retrieval)))?;
+    let joint_motion = JointMotion::parse(&d.joint_motion)
+        .ok_or_else(|| corrupt(format!("unknown joint motion {:?}", d.joint_motion)))?;
     Ok(JobSpec {
         points: blob
             .chunks_exact(12)
@@ -261,18 +272,17 @@ fn spec_from_row(id: &str, json: &str, blob: &[u8]) -> Result<JobSpec, StoreErro
         guidance_max_step: d.guidance_max_step,
         refine_steps: d.refine_steps,
         refine_physics_steps: d.refine_physics_steps,
-        sampler: d.sampler,
-        eta: d.eta,
+        sampler,
         steps: d.steps,
         seed: d.seed,
         samples: d.samples,
         deadline_seconds: d.deadline_seconds,
         preview_every: d.preview_every,
         resolution: d.resolution,
-        retrieval: d.retrieval,
+        retrieval,
         category_guidance: d.category_guidance,
         category_guidance_below: d.category_guidance_below,
-        joint_motion: d.joint_motion,
+        joint_motion,
     })
 }
 
@@ -559,10 +569,10 @@ mod tests {
             "deadline_seconds":600.0,"preview_every":0,"resolution":32}"#;
         let spec = spec_from_row("j", json, &[0u8; 24]).unwrap();
         assert_eq!(spec.points.len(), 2);
-        assert_eq!(spec.retrieval, "off");
+        assert_eq!(spec.retrieval, Retrieval::Off);
         assert_eq!(spec.category_guidance, 0.0);
         assert_eq!(spec.category_guidance_below, 1000);
-        assert_eq!(spec.joint_motion, "screw");
+        assert_eq!(spec.joint_motion, JointMotion::Screw);
         assert_eq!(spec.refine_physics_steps, 0);
         // And a spec round-trips through its row unchanged.
         let (json, blob) = spec_to_row(&JobSpec {

@@ -116,6 +116,7 @@ pub struct WatchArgs {
     #[command(flatten)]
     conn: ConnArgs,
     /// Job id.
+    #[arg(env = "PHYSNAP_JOB_ID")]
     id: String,
     /// Download the artefacts into this directory once the job succeeded.
     #[arg(long, env = "PHYSNAP_OUT")]

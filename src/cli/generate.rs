@@ -46,15 +46,30 @@ pub(crate) struct GenerateArgs {
     #[arg(long, env = "PHYSNAP_POINTS")]
     pub(crate) points: Option<PathBuf>,
     /// Weight of the point-cloud loss (default with --points: 45 ÷ active terms).
-    #[arg(long, env = "PHYSNAP_W_PC")]
+    #[arg(
+        long,
+        help_heading = "Guidance weights",
+        hide_short_help = true,
+        env = "PHYSNAP_W_PC"
+    )]
     pub(crate) w_pc: Option<f64>,
     /// Weight of the penetration loss (default with --points: physnap's 3 × the paper's 2 ÷
     /// active terms, 2 for pc+pen+mob; 0 turns it off).
-    #[arg(long, env = "PHYSNAP_W_PEN")]
+    #[arg(
+        long,
+        help_heading = "Guidance weights",
+        hide_short_help = true,
+        env = "PHYSNAP_W_PEN"
+    )]
     pub(crate) w_pen: Option<f64>,
     /// Weight of the mobility loss (default with --points: physnap's 3 × the paper's 2 ÷ active
     /// terms, 2 for pc+pen+mob; 0 turns it off).
-    #[arg(long, env = "PHYSNAP_W_MOB")]
+    #[arg(
+        long,
+        help_heading = "Guidance weights",
+        hide_short_help = true,
+        env = "PHYSNAP_W_MOB"
+    )]
     pub(crate) w_mob: Option<f64>,
     /// Sampler and guidance schedule.
     #[command(flatten)]
@@ -63,17 +78,18 @@ pub(crate) struct GenerateArgs {
 
 /// The category-guidance flag of every command that samples locally.
 #[derive(Args, Debug)]
+#[command(next_help_heading = "Category guidance")]
 pub(crate) struct CategoryGuidanceArgs {
     /// Classifier-free category guidance w for category-conditioned samples:
     /// ε̂ = ε̂(c) + w·(ε̂(c) − ε̂(∅)) (0: plain conditioning; > 0 doubles the denoiser's work).
     /// Default: 2 without loss guidance, 0 when a scan guides the sample (w = 2 completed scans
     /// worse).
-    #[arg(long, env = "PHYSNAP_CATEGORY_GUIDANCE")]
+    #[arg(long, hide_short_help = true, env = "PHYSNAP_CATEGORY_GUIDANCE")]
     pub(crate) category_guidance: Option<f64>,
     /// Apply the category guidance only in steps with diffusion time t below this, 1-1000;
     /// above it the plain conditional prediction is used (one forward). Default: 500 without
     /// loss guidance, 1000 (every step) when a scan guides the sample.
-    #[arg(long, env = "PHYSNAP_CATEGORY_GUIDANCE_BELOW")]
+    #[arg(long, hide_short_help = true, env = "PHYSNAP_CATEGORY_GUIDANCE_BELOW")]
     pub(crate) category_guidance_below: Option<usize>,
 }
 
@@ -91,46 +107,52 @@ impl CategoryGuidanceArgs {
 
 /// Sampler and guidance-schedule flags shared by `generate` and `eval guided`.
 #[derive(Args, Debug)]
+#[command(next_help_heading = "Sampling and guidance schedule")]
 pub(crate) struct SamplingArgs {
     /// Guide the steps with diffusion time t < this (n_g).
-    #[arg(long, env = "PHYSNAP_GUIDANCE_STEPS", default_value_t = physnap::engine::guidance::DEFAULT_GUIDED_STEPS)]
+    #[arg(long, hide_short_help = true, env = "PHYSNAP_GUIDANCE_STEPS", default_value_t = physnap::engine::guidance::DEFAULT_GUIDED_STEPS)]
     pub(crate) guidance_steps: usize,
     /// Temperature τ of the point-to-part soft assignment.
-    #[arg(long, env = "PHYSNAP_TAU", default_value_t = physnap::engine::guidance::DEFAULT_TAU)]
+    #[arg(long, hide_short_help = true, env = "PHYSNAP_TAU", default_value_t = physnap::engine::guidance::DEFAULT_TAU)]
     pub(crate) tau: f64,
     /// Clamp each guidance-gradient entry to ±this (model space); a deviation from the paper's
     /// raw gradient, which diverges with the shipped weights. 0: off (the paper's raw step).
-    #[arg(long, env = "PHYSNAP_GUIDANCE_MAX_STEP", default_value_t = physnap::engine::guidance::DEFAULT_MAX_STEP)]
+    #[arg(long, hide_short_help = true, env = "PHYSNAP_GUIDANCE_MAX_STEP", default_value_t = physnap::engine::guidance::DEFAULT_MAX_STEP)]
     pub(crate) guidance_max_step: f64,
     /// Refinement: small clamped gradient steps (a tenth of --guidance-max-step) on the guidance
     /// loss of the finished sample (physnap, not in the paper; 0: off).
-    #[arg(long, env = "PHYSNAP_GUIDANCE_REFINE_STEPS", default_value_t = physnap::engine::guidance::DEFAULT_REFINE_STEPS)]
+    #[arg(long, hide_short_help = true, env = "PHYSNAP_GUIDANCE_REFINE_STEPS", default_value_t = physnap::engine::guidance::DEFAULT_REFINE_STEPS)]
     pub(crate) guidance_refine_steps: usize,
     /// Physics-only refinement: this many more such steps after those, on ℓ_pen and ℓ_mob alone
     /// (ℓ_pc off), which push out the small overlaps ℓ_pc holds in place (physnap; 0: off).
-    #[arg(long, env = "PHYSNAP_GUIDANCE_REFINE_PHYSICS_STEPS", default_value_t = physnap::engine::guidance::DEFAULT_REFINE_PHYSICS_STEPS)]
+    #[arg(long, hide_short_help = true, env = "PHYSNAP_GUIDANCE_REFINE_PHYSICS_STEPS", default_value_t = physnap::engine::guidance::DEFAULT_REFINE_PHYSICS_STEPS)]
     pub(crate) guidance_refine_physics_steps: usize,
     /// Reverse-step rule: ddim (default) or ddpm (NAP; strided ancestral with --steps < 1000).
     /// The paper's sampler is `--sampler ddpm --steps 0`.
-    #[arg(long, env = "PHYSNAP_SAMPLER", default_value = "ddim", value_parser = ["ddpm", "ddim"])]
+    #[arg(long, hide_short_help = true, env = "PHYSNAP_SAMPLER", default_value = "ddim", value_parser = ["ddpm", "ddim"])]
     pub(crate) sampler: String,
     /// Reverse steps (0: all 1000). Guidance applies to those with t < --guidance-steps.
-    #[arg(long, env = "PHYSNAP_STEPS", default_value_t = physnap::engine::sample::DEFAULT_STEPS)]
+    #[arg(long, hide_short_help = true, env = "PHYSNAP_STEPS", default_value_t = physnap::engine::sample::DEFAULT_STEPS)]
     pub(crate) steps: usize,
     /// DDIM noise level η in [0, 1].
-    #[arg(long, env = "PHYSNAP_DDIM_ETA", default_value_t = 0.0)]
+    #[arg(
+        long,
+        hide_short_help = true,
+        env = "PHYSNAP_DDIM_ETA",
+        default_value_t = 0.0
+    )]
     pub(crate) eta: f64,
     /// Replace part shapes by their nearest training code of the weights' codebook: auto
     /// (empty shapes when the weights have a codebook, else off), off, empty (shapes that mesh
     /// empty), all (every latent shape: NAP's retrieval variant), category (every latent shape
     /// of a category-conditioned sample, from that category's codes; samples without a
     /// category: as empty).
-    #[arg(long, env = "PHYSNAP_RETRIEVAL", default_value = "auto", value_parser = ["auto", "off", "empty", "all", "category"])]
+    #[arg(long, hide_short_help = true, env = "PHYSNAP_RETRIEVAL", default_value = "auto", value_parser = ["auto", "off", "empty", "all", "category"])]
     pub(crate) retrieval: String,
     /// Joint motions of the projected samples: dominant (default: each joint keeps only its
     /// wider range, in units of the feature scales, so it rotates, slides or is fixed) or
     /// screw (NAP: both ranges kept).
-    #[arg(long, env = "PHYSNAP_JOINT_MOTION", default_value = "dominant", value_parser = ["screw", "dominant"])]
+    #[arg(long, hide_short_help = true, env = "PHYSNAP_JOINT_MOTION", default_value = "dominant", value_parser = ["screw", "dominant"])]
     pub(crate) joint_motion: String,
     /// Category guidance.
     #[command(flatten)]

@@ -122,3 +122,71 @@ pub(crate) fn run(command: Command) -> anyhow::Result<()> {
         Command::Eval { command } => eval::run(command),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use clap::CommandFactory;
+
+    use super::Cli;
+
+    /// Every flag of every subcommand has a `PHYSNAP_*` environment twin (help and version
+    /// excepted), so a container or compose file can set anything a shell can.
+    #[test]
+    fn every_flag_has_an_env_twin() {
+        fn walk(cmd: &clap::Command, path: &str, missing: &mut Vec<String>) {
+            for arg in cmd.get_arguments() {
+                let id = arg.get_id().as_str();
+                if matches!(id, "help" | "version") {
+                    continue;
+                }
+                match arg.get_env() {
+                    Some(env) if env.to_string_lossy().starts_with("PHYSNAP_") => {}
+                    _ => missing.push(format!("{path} --{id}")),
+                }
+            }
+            for sub in cmd.get_subcommands() {
+                walk(sub, &format!("{path} {}", sub.get_name()), missing);
+            }
+        }
+        let mut cmd = Cli::command();
+        cmd.build();
+        let mut missing = Vec::new();
+        walk(&cmd, "physnap", &mut missing);
+        assert!(
+            missing.is_empty(),
+            "flags without a PHYSNAP_* env twin: {missing:?}"
+        );
+    }
+
+    /// `generate -h` lists the flags most runs need; the research knobs are in `--help`.
+    #[test]
+    fn generate_short_help_hides_the_research_knobs() {
+        let mut cmd = Cli::command();
+        cmd.build();
+        let generate = cmd
+            .find_subcommand_mut("generate")
+            .expect("generate exists");
+        let short = generate.render_help().to_string();
+        let long = generate.render_long_help().to_string();
+        for user in [
+            "--points",
+            "--category",
+            "--samples",
+            "--seed",
+            "--out",
+            "--weights",
+        ] {
+            assert!(short.contains(user), "{user} missing from -h:\n{short}");
+        }
+        for knob in [
+            "--tau",
+            "--guidance-max-step",
+            "--w-pc",
+            "--category-guidance-below",
+        ] {
+            assert!(!short.contains(knob), "{knob} in -h:\n{short}");
+            assert!(long.contains(knob), "{knob} missing from --help");
+        }
+        assert!(long.contains("Sampling and guidance schedule"), "{long}");
+    }
+}

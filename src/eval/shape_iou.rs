@@ -13,38 +13,7 @@ use crate::train::shape::*;
 use burn::module::Module;
 use burn::tensor::{Tensor, TensorData};
 use rayon::prelude::*;
-use serde_json::{Value, json};
 use std::path::Path;
-
-/// One evaluation.
-#[derive(Debug, Clone, PartialEq)]
-pub struct EvalPoint {
-    /// Steps done.
-    pub step: usize,
-    /// Seconds since training started.
-    pub elapsed_s: f64,
-    /// Mean IoU over the val parts.
-    pub iou: f64,
-    /// Mean L1 over the val parts' uniform + near samples.
-    pub l1: f64,
-}
-
-impl EvalPoint {
-    /// `{"step", "elapsed_s", "iou", "l1"}` as in `shape_train.json` and checkpoints.
-    pub(crate) fn to_json(&self) -> Value {
-        json!({ "step": self.step, "elapsed_s": self.elapsed_s, "iou": self.iou, "l1": self.l1 })
-    }
-
-    /// The inverse of [`EvalPoint::to_json`] (None when a field is missing or not a number).
-    pub(crate) fn from_json(v: &Value) -> Option<Self> {
-        Some(EvalPoint {
-            step: v["step"].as_u64()? as usize,
-            elapsed_s: v["elapsed_s"].as_f64()?,
-            iou: v["iou"].as_f64()?,
-            l1: v["l1"].as_f64()?,
-        })
-    }
-}
 
 /// Cell-centre grid over [−0.55, 0.55]³, x fastest: where `eval shape` samples both
 /// occupancies of its IoU.

@@ -78,19 +78,25 @@ pub fn synth(a: SynthArgs) -> anyhow::Result<()> {
 }
 
 pub fn import(a: ImportArgs) -> anyhow::Result<()> {
-    let total = physnap::data::dataset::object_dirs(&a.src)
-        .with_context(|| format!("listing {}", a.src.display()))?
+    if !a.urdf.is_empty() {
+        return import_urdf(a);
+    }
+    let Some(src) = a.src.clone() else {
+        bail!("invalid arguments: give --partnet-mobility DIR and/or --urdf PATH");
+    };
+    let total = physnap::data::dataset::object_dirs(&src)
+        .with_context(|| format!("listing {}", src.display()))?
         .len();
     if total == 0 {
         bail!(
             "no objects in {} (expected folders containing mobility_v2.json)",
-            a.src.display()
+            src.display()
         );
     }
     let pb = super::progress_bar(total, "import");
     let t0 = std::time::Instant::now();
     let report = import_dir(
-        &a.src,
+        &src,
         &a.out,
         &ImportOptions {
             seed: a.seed,
@@ -113,6 +119,57 @@ pub fn import(a: ImportArgs) -> anyhow::Result<()> {
     );
     for (id, reason) in &report.skipped {
         println!("skipped {id}: {reason}");
+    }
+    println!("index: {}", a.out.join("dataset.json").display());
+    Ok(())
+}
+
+/// `data import --urdf ...` (optionally with --partnet-mobility): see `physnap::data::urdf`.
+fn import_urdf(a: ImportArgs) -> anyhow::Result<()> {
+    use physnap::data::urdf::{PerObject, UrdfOptions, convert::GeometrySource, import};
+    let uo = UrdfOptions {
+        geometry: if a.geometry == "collision" {
+            GeometrySource::Collision
+        } else {
+            GeometrySource::Visual
+        },
+        continuous_range: [a.continuous_range[0], a.continuous_range[1]],
+        subtrees: a.subtree.clone(),
+        category: PerObject::parse(&a.category),
+        up: PerObject::parse(&a.up),
+        front: PerObject::parse(&a.front),
+    };
+    let pb = super::progress_bar(1, "import");
+    let t0 = std::time::Instant::now();
+    let report = import(
+        &a.urdf,
+        a.src.as_deref(),
+        &a.out,
+        &uo,
+        &ImportOptions {
+            seed: a.seed,
+            uniform: a.uniform,
+            near: a.near,
+            surface: a.surface,
+        },
+        &|n, total| {
+            pb.set_length(total as u64);
+            pb.set_position(n as u64)
+        },
+    )?;
+    pb.finish_and_clear();
+    let r = &report.dataset;
+    println!(
+        "imported {} of {} objects in {:.1} s",
+        r.entries.len(),
+        report.planned,
+        t0.elapsed().as_secs_f64()
+    );
+    for (id, reason) in &r.skipped {
+        println!("skipped {id}: {reason}");
+    }
+    for (id, note) in &r.notes {
+        println!("note {id}: {note}");
     }
     println!("index: {}", a.out.join("dataset.json").display());
     Ok(())
@@ -150,6 +207,19 @@ pub fn scan(a: ScanArgs) -> anyhow::Result<()> {
         pts.extend_from_slice(&s.points);
         colours.extend(std::iter::repeat_n([220, 30, 30], s.points.len()));
         write_coloured_ply(preview, &pts, &colours)?;
+    }
+    if let Some(path) = &a.camera {
+        let cam = serde_json::json!({
+            "object": a.object.display().to_string(), "cloud": a.out.display().to_string(),
+            "seed": a.seed, "points": a.points,
+            "elevation_deg": s.elevation, "azimuth_deg": s.azimuth, "distance_radii": s.distance,
+            "eye": [s.camera.eye.x, s.camera.eye.y, s.camera.eye.z],
+            "target": [s.camera.target.x, s.camera.target.y, s.camera.target.z],
+            "fov_deg": s.camera.fov_deg, "image": s.camera.image,
+            "frame": "object (canonical: +Z up, front -X)",
+        });
+        std::fs::write(path, serde_json::to_string_pretty(&cam)?)
+            .with_context(|| format!("writing {}", path.display()))?;
     }
     write_cloud(s.points, &a.out)?;
     println!(

@@ -834,8 +834,32 @@ struct SynthArgs {
 #[derive(Args, Debug)]
 struct ImportArgs {
     /// Folder of PartNet-Mobility-layout object folders.
-    #[arg(long = "partnet-mobility", env = "PHYSNAP_PARTNET_MOBILITY")]
-    src: PathBuf,
+    #[arg(long = "partnet-mobility", env = "PHYSNAP_PARTNET_MOBILITY", required_unless_present = "urdf")]
+    src: Option<PathBuf>,
+    /// URDF files or folders of URDFs (searched recursively); with --partnet-mobility, both
+    /// sources go into one data set.
+    #[arg(long, env = "PHYSNAP_URDF", num_args = 1.., value_delimiter = ',')]
+    urdf: Vec<PathBuf>,
+    /// URDF geometry to import: visual or collision.
+    #[arg(long, env = "PHYSNAP_URDF_GEOMETRY", default_value = "visual", value_parser = ["visual", "collision"])]
+    geometry: String,
+    /// Range LOWER,UPPER (radians) given to continuous URDF joints (PartNet-Mobility's noLimit).
+    #[arg(long, env = "PHYSNAP_URDF_CONTINUOUS_RANGE", value_delimiter = ',', num_args = 2, allow_hyphen_values = true, default_values_t = [0.0, std::f64::consts::TAU])]
+    continuous_range: Vec<f64>,
+    /// LINK or LINK=ID (repeatable): cut one object per link out of a scene URDF; the link
+    /// is the base and its descendants the parts.
+    #[arg(long, env = "PHYSNAP_URDF_SUBTREE", value_delimiter = ',')]
+    subtree: Vec<String>,
+    /// URDF object category: CATEGORY for all, or ID=CATEGORY (repeatable; ID = object id,
+    /// subtree link or file stem).
+    #[arg(long, env = "PHYSNAP_URDF_CATEGORY", value_delimiter = ',')]
+    category: Vec<String>,
+    /// The asset's up axis (+X..-Z), or ID=AXIS (repeatable); mapped to +Z. Default +Z.
+    #[arg(long, env = "PHYSNAP_URDF_UP", value_delimiter = ',', allow_hyphen_values = true)]
+    up: Vec<String>,
+    /// The asset's front axis, or ID=AXIS (repeatable); mapped to -X. Default -X.
+    #[arg(long, env = "PHYSNAP_URDF_FRONT", value_delimiter = ',', allow_hyphen_values = true)]
+    front: Vec<String>,
     /// Output directory for the training set.
     #[arg(long, env = "PHYSNAP_OUT")]
     out: PathBuf,
@@ -870,6 +894,10 @@ struct ScanArgs {
     /// Also write a coloured PLY with the object's surface (grey) and the scan (red).
     #[arg(long, env = "PHYSNAP_SCAN_PREVIEW")]
     preview: Option<PathBuf>,
+    /// Also write the camera (eye, target in the object's canonical frame, field of view,
+    /// image size, elevation, azimuth, distance) as JSON.
+    #[arg(long, env = "PHYSNAP_SCAN_CAMERA")]
+    camera: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]

@@ -424,13 +424,13 @@ pub fn build(
         if range[0] > range[1] {
             range.swap(0, 1);
         }
-        // Keep the rest state at the closed end: a range entirely below 0 is the same motion
-        // about the reversed axis.
-        if range[1] <= 0.0 && range[0] < 0.0 {
+        // Opening goes the positive way: a range reaching further below 0 than above it is
+        // the same motion about the reversed axis (q = 0 stays the rest state).
+        if -range[0] > range[1] {
             axis = -axis;
             range = [-range[1], -range[0]];
             notes.push(format!(
-                "joint {:?}: range below 0, axis reversed to make it [{}, {}]",
+                "joint {:?}: range mostly below 0, axis reversed to make it [{}, {}]",
                 j.name, range[0], range[1]
             ));
         }

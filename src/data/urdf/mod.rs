@@ -244,9 +244,11 @@ struct Plan {
 }
 
 fn matrix_rows(m: &Matrix4<f64>) -> Value {
-    json!((0..4)
-        .map(|r| (0..4).map(|c| m[(r, c)]).collect::<Vec<f64>>())
-        .collect::<Vec<_>>())
+    json!(
+        (0..4)
+            .map(|r| (0..4).map(|c| m[(r, c)]).collect::<Vec<f64>>())
+            .collect::<Vec<_>>()
+    )
 }
 
 fn copy_dir(src: &Path, dst: &Path) -> Result<(), UrdfError> {
@@ -345,11 +347,12 @@ pub fn import(
                     )
                 })?
                 .to_string();
-            let axis = |p: &PerObject, field: &str, default: &str| -> Result<SignedAxis, UrdfError> {
-                let v = p.get(&keys).unwrap_or(default);
-                SignedAxis::parse(v)
-                    .ok_or_else(|| UrdfError::option(field, "one of +X -X +Y -Y +Z -Z", v))
-            };
+            let axis =
+                |p: &PerObject, field: &str, default: &str| -> Result<SignedAxis, UrdfError> {
+                    let v = p.get(&keys).unwrap_or(default);
+                    SignedAxis::parse(v)
+                        .ok_or_else(|| UrdfError::option(field, "one of +X -X +Y -Y +Z -Z", v))
+                };
             let up = axis(&uo.up, "--up", "+Z")?;
             let front = axis(&uo.front, "--front", "-X")?;
             if frame::canonical_rotation(up, front).is_none() {
@@ -402,7 +405,11 @@ pub fn import(
         }
     }
     if plans.is_empty() && pm_dirs.is_empty() {
-        return Err(UrdfError::option("--urdf", "at least one URDF file", "none found"));
+        return Err(UrdfError::option(
+            "--urdf",
+            "at least one URDF file",
+            "none found",
+        ));
     }
 
     // 3. Build and stage every object; broken assets are skipped with a reason.
@@ -436,7 +443,7 @@ pub fn import(
                 .collect(),
         };
         match convert::build(robot, &spec, &mut cache) {
-            Err(reason) => skipped.push((plan.id.clone(), reason)),
+            Err(reason) => skipped.push((plan.id.clone(), reason.to_string())),
             Ok(obj) => {
                 let source = json!({
                     "format": "urdf",
@@ -511,16 +518,20 @@ pub fn import(
             }
         }
     }
-    index["skipped"] = json!(report
-        .skipped
-        .iter()
-        .map(|(id, r)| json!({ "id": id, "reason": r }))
-        .collect::<Vec<_>>());
-    index["notes"] = json!(report
-        .notes
-        .iter()
-        .map(|(id, n)| json!({ "id": id, "note": n }))
-        .collect::<Vec<_>>());
+    index["skipped"] = json!(
+        report
+            .skipped
+            .iter()
+            .map(|(id, r)| json!({ "id": id, "reason": r }))
+            .collect::<Vec<_>>()
+    );
+    index["notes"] = json!(
+        report
+            .notes
+            .iter()
+            .map(|(id, n)| json!({ "id": id, "note": n }))
+            .collect::<Vec<_>>()
+    );
     index["staged"] = json!("pm");
     std::fs::write(
         &index_path,

@@ -177,16 +177,18 @@ impl Ctx<'_> {
             })
     }
 
-    fn vec3(&self, e: &Element, key: &str, default: Vector3<f64>) -> Result<Vector3<f64>, UrdfError> {
+    fn vec3(
+        &self,
+        e: &Element,
+        key: &str,
+        default: Vector3<f64>,
+    ) -> Result<Vector3<f64>, UrdfError> {
         let Some(text) = e.attr(key) else {
             return Ok(default);
         };
         let parts: Vec<&str> = text.split_whitespace().collect();
         if parts.len() != 3 {
-            return Err(self.err(
-                e,
-                format!("attribute {key}={text:?} must be 3 numbers"),
-            ));
+            return Err(self.err(e, format!("attribute {key}={text:?} must be 3 numbers")));
         }
         let mut v = Vector3::zeros();
         for (a, p) in parts.iter().enumerate() {
@@ -246,8 +248,14 @@ impl Ctx<'_> {
                 GeomShape::Box(size)
             }
             "cylinder" => GeomShape::Cylinder {
-                radius: positive(self.number(s, "radius", self.required(s, "radius")?)?, "radius")?,
-                length: positive(self.number(s, "length", self.required(s, "length")?)?, "length")?,
+                radius: positive(
+                    self.number(s, "radius", self.required(s, "radius")?)?,
+                    "radius",
+                )?,
+                length: positive(
+                    self.number(s, "length", self.required(s, "length")?)?,
+                    "length",
+                )?,
             },
             _ => GeomShape::Sphere(positive(
                 self.number(s, "radius", self.required(s, "radius")?)?,

@@ -112,7 +112,8 @@ fn mobility_urdf(obj: &BuiltObject, id: &str) -> String {
             .map(|j| world_to_raw(&j.origin.coords))
             .unwrap_or([0.0; 3])
     };
-    let mut x = format!("<?xml version=\"1.0\" ?>\n<robot name=\"{id}\">\n\t<link name=\"base\"/>\n");
+    let mut x =
+        format!("<?xml version=\"1.0\" ?>\n<robot name=\"{id}\">\n\t<link name=\"base\"/>\n");
     for k in 0..obj.parts.len() {
         let f = frame(k);
         let _ = writeln!(x, "\t<link name=\"link_{k}\">");

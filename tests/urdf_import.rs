@@ -189,7 +189,7 @@ fn continuous_joints_get_the_continuous_range_and_axes_are_normalised() {
     let src = write_urdf(&tmp.path().join("src"), "spinner", SPINNER);
     let out = tmp.path().join("out");
     let r = import(
-        &[src.clone()],
+        std::slice::from_ref(&src),
         None,
         &out,
         &opts("Fan"),
@@ -443,7 +443,7 @@ fn malformed_urdf_names_file_line_and_element_and_writes_nothing() {
     .unwrap();
     let out = tmp.path().join("out");
     let e = import(
-        &[src.clone()],
+        std::slice::from_ref(&src),
         None,
         &out,
         &opts("Box"),

@@ -239,6 +239,9 @@ pub fn load_mesh(path: &Path) -> Result<TriMesh, Broken> {
     mesh.map_err(bad)
 }
 
+/// A part's mesh in the source frame, before the canonical transform (f64 positions).
+type SourceMesh = (Vec<Vector3<f64>>, Vec<[u32; 3]>);
+
 fn transform(iso: &Isometry3<f64>, p: [f32; 3]) -> Vector3<f64> {
     (iso * Point3::new(p[0] as f64, p[1] as f64, p[2] as f64)).coords
 }
@@ -365,8 +368,7 @@ pub fn build(
     }
 
     // Geometry in the source frame.
-    let mut src_meshes: Vec<(Vec<Vector3<f64>>, Vec<[u32; 3]>)> =
-        vec![Default::default(); parts.len()];
+    let mut src_meshes: Vec<SourceMesh> = vec![Default::default(); parts.len()];
     for &l in &order {
         let link = &robot.links[l];
         let geoms = match spec.geometry {

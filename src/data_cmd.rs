@@ -127,13 +127,19 @@ pub fn import(a: ImportArgs) -> anyhow::Result<()> {
 /// `data import --urdf ...` (optionally with --partnet-mobility): see `physnap::data::urdf`.
 fn import_urdf(a: ImportArgs) -> anyhow::Result<()> {
     use physnap::data::urdf::{PerObject, UrdfOptions, convert::GeometrySource, import};
+    let [lo, hi] = a.continuous_range[..] else {
+        bail!(
+            "invalid --continuous-range: {:?} (must be two numbers LOWER,UPPER)",
+            a.continuous_range
+        );
+    };
     let uo = UrdfOptions {
         geometry: if a.geometry == "collision" {
             GeometrySource::Collision
         } else {
             GeometrySource::Visual
         },
-        continuous_range: [a.continuous_range[0], a.continuous_range[1]],
+        continuous_range: [lo, hi],
         subtrees: a.subtree.clone(),
         category: PerObject::parse(&a.category),
         up: PerObject::parse(&a.up),

@@ -848,7 +848,7 @@ struct ImportArgs {
     #[arg(long, env = "PHYSNAP_URDF_GEOMETRY", default_value = "visual", value_parser = ["visual", "collision"])]
     geometry: String,
     /// Range LOWER,UPPER (radians) given to continuous URDF joints (PartNet-Mobility's noLimit).
-    #[arg(long, env = "PHYSNAP_URDF_CONTINUOUS_RANGE", value_delimiter = ',', num_args = 2, allow_hyphen_values = true, default_values_t = [0.0, std::f64::consts::TAU])]
+    #[arg(long, env = "PHYSNAP_URDF_CONTINUOUS_RANGE", value_delimiter = ',', num_args = 1..=2, allow_hyphen_values = true, default_values_t = [0.0, std::f64::consts::TAU])]
     continuous_range: Vec<f64>,
     /// LINK or LINK=ID (repeatable): cut one object per link out of a scene URDF; the link
     /// is the base and its descendants the parts.

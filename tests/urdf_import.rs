@@ -648,3 +648,37 @@ fn mjcf_converter_resolves_classes_degrees_and_msh_meshes() {
         1e-6
     ));
 }
+
+#[test]
+fn cli_flags_take_comma_lists_and_have_env_twins() {
+    let tmp = tempfile::tempdir().unwrap();
+    let src = write_urdf(&tmp.path().join("src"), "spinner", SPINNER);
+    let out = tmp.path().join("out");
+    let o = Command::new(env!("CARGO_BIN_EXE_physnap"))
+        .args(["data", "import", "--urdf"])
+        .arg(&src)
+        .arg("--out")
+        .arg(&out)
+        .args(["--continuous-range=-1,1", "--front=-X", "--up", "+Z"])
+        .args(["--uniform", "32", "--near", "32", "--surface", "32"])
+        .env("PHYSNAP_URDF_CATEGORY", "spinner=Fan")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j = &object(&out, "spinner").joints[0];
+    assert!(close(&j.revolute, &[-1.0, 1.0], 1e-12), "{:?}", j.revolute);
+    let o = Command::new(env!("CARGO_BIN_EXE_physnap"))
+        .args(["data", "import", "--urdf"])
+        .arg(&src)
+        .arg("--out")
+        .arg(tmp.path().join("out2"))
+        .args(["--category", "Fan", "--front=+Z"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        stderr.contains("--front") && stderr.contains("perpendicular"),
+        "{stderr}"
+    );
+}

@@ -509,7 +509,12 @@ pub fn import(
         source,
     };
     let mut index: Value = serde_json::from_str(&std::fs::read_to_string(&index_path).map_err(io)?)
-        .map_err(|e| UrdfError::xml(&index_path, 1, "dataset.json", e.to_string()))?;
+        .map_err(|e| {
+            UrdfError::Data(DataError::Malformed {
+                path: index_path.clone(),
+                detail: e.to_string(),
+            })
+        })?;
     if let Some(objs) = index["objects"].as_array_mut() {
         for o in objs {
             let id = o["id"].as_str().unwrap_or_default().to_string();

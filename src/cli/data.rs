@@ -59,8 +59,46 @@ pub(crate) struct SynthArgs {
 #[derive(Args, Debug)]
 pub(crate) struct ImportArgs {
     /// Folder of PartNet-Mobility-layout object folders.
-    #[arg(long = "partnet-mobility", env = "PHYSNAP_PARTNET_MOBILITY")]
-    pub(crate) src: PathBuf,
+    #[arg(
+        long = "partnet-mobility",
+        env = "PHYSNAP_PARTNET_MOBILITY",
+        required_unless_present = "urdf"
+    )]
+    pub(crate) src: Option<PathBuf>,
+    /// URDF files or folders of URDFs (searched recursively); with --partnet-mobility, both
+    /// sources go into one data set.
+    #[arg(long, env = "PHYSNAP_URDF", num_args = 1.., value_delimiter = ',')]
+    pub(crate) urdf: Vec<PathBuf>,
+    /// URDF geometry to import: visual or collision.
+    #[arg(long, env = "PHYSNAP_URDF_GEOMETRY", default_value = "visual", value_parser = ["visual", "collision"])]
+    pub(crate) geometry: String,
+    /// Range LOWER,UPPER (radians) given to continuous URDF joints (PartNet-Mobility's noLimit).
+    #[arg(long, env = "PHYSNAP_URDF_CONTINUOUS_RANGE", value_delimiter = ',', num_args = 1..=2, allow_hyphen_values = true, default_values_t = [0.0, std::f64::consts::TAU])]
+    pub(crate) continuous_range: Vec<f64>,
+    /// LINK or LINK=ID (repeatable): cut one object per link out of a scene URDF; the link
+    /// is the base and its descendants the parts.
+    #[arg(long, env = "PHYSNAP_URDF_SUBTREE", value_delimiter = ',')]
+    pub(crate) subtree: Vec<String>,
+    /// URDF object category: CATEGORY for all, or ID=CATEGORY (repeatable; ID = object id,
+    /// subtree link or file stem).
+    #[arg(long, env = "PHYSNAP_URDF_CATEGORY", value_delimiter = ',')]
+    pub(crate) category: Vec<String>,
+    /// The asset's up axis (+X..-Z), or ID=AXIS (repeatable); mapped to +Z. Default +Z.
+    #[arg(
+        long,
+        env = "PHYSNAP_URDF_UP",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
+    pub(crate) up: Vec<String>,
+    /// The asset's front axis, or ID=AXIS (repeatable); mapped to -X. Default -X.
+    #[arg(
+        long,
+        env = "PHYSNAP_URDF_FRONT",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
+    pub(crate) front: Vec<String>,
     /// Output directory for the training set.
     #[arg(long, env = "PHYSNAP_OUT")]
     pub(crate) out: PathBuf,
@@ -95,6 +133,10 @@ pub(crate) struct ScanArgs {
     /// Also write a coloured PLY with the object's surface (grey) and the scan (red).
     #[arg(long, env = "PHYSNAP_SCAN_PREVIEW")]
     pub(crate) preview: Option<PathBuf>,
+    /// Also write the camera (eye, target in the object's canonical frame, field of view,
+    /// image size, elevation, azimuth, distance) as JSON.
+    #[arg(long, env = "PHYSNAP_SCAN_CAMERA")]
+    pub(crate) camera: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -177,19 +219,25 @@ pub(crate) fn synth(a: SynthArgs) -> anyhow::Result<()> {
 }
 
 pub(crate) fn import(a: ImportArgs) -> anyhow::Result<()> {
-    let total = physnap::data::dataset::object_dirs(&a.src)
-        .with_context(|| format!("listing {}", a.src.display()))?
+    if !a.urdf.is_empty() {
+        return import_urdf(a);
+    }
+    let Some(src) = a.src.clone() else {
+        bail!("invalid arguments: give --partnet-mobility DIR and/or --urdf PATH");
+    };
+    let total = physnap::data::dataset::object_dirs(&src)
+        .with_context(|| format!("listing {}", src.display()))?
         .len();
     if total == 0 {
         bail!(
             "no objects in {} (expected folders containing mobility_v2.json)",
-            a.src.display()
+            src.display()
         );
     }
     let pb = super::progress_bar(total, "import");
     let t0 = std::time::Instant::now();
     let report = import_dir(
-        &a.src,
+        &src,
         &a.out,
         &ImportOptions {
             seed: a.seed,
@@ -217,7 +265,64 @@ pub(crate) fn import(a: ImportArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-pub(crate) fn write_cloud(points: Vec<[f32; 3]>, out: &Path) -> anyhow::Result<()> {
+/// `data import --urdf ...` (optionally with --partnet-mobility): see `physnap::data::urdf`.
+fn import_urdf(a: ImportArgs) -> anyhow::Result<()> {
+    use physnap::data::urdf::{PerObject, UrdfOptions, convert::GeometrySource, import};
+    let [lo, hi] = a.continuous_range[..] else {
+        bail!(
+            "invalid --continuous-range: {:?} (must be two numbers LOWER,UPPER)",
+            a.continuous_range
+        );
+    };
+    let uo = UrdfOptions {
+        geometry: if a.geometry == "collision" {
+            GeometrySource::Collision
+        } else {
+            GeometrySource::Visual
+        },
+        continuous_range: [lo, hi],
+        subtrees: a.subtree.clone(),
+        category: PerObject::parse(&a.category),
+        up: PerObject::parse(&a.up),
+        front: PerObject::parse(&a.front),
+    };
+    let pb = super::progress_bar(1, "import");
+    let t0 = std::time::Instant::now();
+    let report = import(
+        &a.urdf,
+        a.src.as_deref(),
+        &a.out,
+        &uo,
+        &ImportOptions {
+            seed: a.seed,
+            uniform: a.uniform,
+            near: a.near,
+            surface: a.surface,
+        },
+        &|n, total| {
+            pb.set_length(total as u64);
+            pb.set_position(n as u64)
+        },
+    )?;
+    pb.finish_and_clear();
+    let r = &report.dataset;
+    println!(
+        "imported {} of {} objects in {:.1} s",
+        r.entries.len(),
+        report.planned,
+        t0.elapsed().as_secs_f64()
+    );
+    for (id, reason) in &r.skipped {
+        println!("skipped {id}: {reason}");
+    }
+    for (id, note) in &r.notes {
+        println!("note {id}: {note}");
+    }
+    println!("index: {}", a.out.join("dataset.json").display());
+    Ok(())
+}
+
+fn write_cloud(points: Vec<[f32; 3]>, out: &Path) -> anyhow::Result<()> {
     let format = Format::from_path(out).with_context(|| {
         format!(
             "invalid --out {}: extension must be .ply, .npy or .json",
@@ -249,6 +354,19 @@ pub(crate) fn scan(a: ScanArgs) -> anyhow::Result<()> {
         pts.extend_from_slice(&s.points);
         colours.extend(std::iter::repeat_n([220, 30, 30], s.points.len()));
         write_coloured_ply(preview, &pts, &colours)?;
+    }
+    if let Some(path) = &a.camera {
+        let cam = serde_json::json!({
+            "object": a.object.display().to_string(), "cloud": a.out.display().to_string(),
+            "seed": a.seed, "points": a.points,
+            "elevation_deg": s.elevation, "azimuth_deg": s.azimuth, "distance_radii": s.distance,
+            "eye": [s.camera.eye.x, s.camera.eye.y, s.camera.eye.z],
+            "target": [s.camera.target.x, s.camera.target.y, s.camera.target.z],
+            "fov_deg": s.camera.fov_deg, "image": s.camera.image,
+            "frame": "object (canonical: +Z up, front -X)",
+        });
+        std::fs::write(path, serde_json::to_string_pretty(&cam)?)
+            .with_context(|| format!("writing {}", path.display()))?;
     }
     write_cloud(s.points, &a.out)?;
     println!(

@@ -14,6 +14,7 @@ pub mod partnet;
 pub mod rng;
 pub mod scan;
 pub mod synth;
+pub mod urdf;
 pub mod validity;
 
 use crate::object::ArticulatedObject;

@@ -16,6 +16,7 @@ pub mod marching_cubes;
 pub mod obj;
 pub mod primitives;
 pub mod sampling;
+pub mod stl;
 
 use nalgebra::Vector3;
 use rayon::prelude::*;

@@ -1,0 +1,362 @@
+//! Tests of `spec`.
+
+use super::*;
+
+fn caps() -> ModelCaps {
+    ModelCaps {
+        categories: vec!["Door".into(), "Window".into()],
+        conditional: true,
+        schedule_steps: 1000,
+        codebook: true,
+        codebook_categories: vec![1],
+    }
+}
+
+fn cloud(n: usize) -> PointsInput {
+    PointsInput::Triples((0..n).map(|i| [i as f64, 0.0, 1.0]).collect())
+}
+
+#[test]
+fn category_guidance_defaults_with_a_category_and_is_zero_without() {
+    // `w_pc` 0 (with the other weights 0) makes the job plain sampling; None keeps the
+    // default loss weights, a scan-guided job.
+    let run = |cat: Option<&str>, w: Option<f64>, w_pc: Option<f64>| {
+        let input = JobInput {
+            points: Some(cloud(16)),
+            category: cat.map(str::to_string),
+            category_guidance: w,
+            w_pc,
+            w_pen: w_pc,
+            w_mob: w_pc,
+            ..Default::default()
+        };
+        validate(&input, &caps(), &Limits::default(), 1)
+            .unwrap()
+            .category_guidance
+    };
+    for w_pc in [None, Some(0.0)] {
+        assert_eq!(run(None, None, w_pc), 0.0);
+        assert_eq!(run(None, Some(0.0), w_pc), 0.0);
+        assert_eq!(run(Some("Door"), Some(0.0), w_pc), 0.0);
+        assert_eq!(run(Some("Door"), Some(4.5), w_pc), 4.5);
+    }
+    // By default a scan-guided job is not category-guided (it completed scans worse,
+    // EVALUATION.md); plain sampling is, at w = 2.
+    assert_eq!(run(Some("Door"), None, None), 0.0);
+    assert_eq!(run(Some("Door"), None, Some(0.0)), 2.0);
+    // A scan-guided job is category-guided in every step by default, plain sampling only
+    // below t = 500; either can be asked for.
+    let below = |b: Option<u32>, w_pc: f64| {
+        let input = JobInput {
+            points: Some(cloud(16)),
+            category: Some("Door".into()),
+            category_guidance_below: b,
+            w_pc: Some(w_pc),
+            w_pen: Some(0.0),
+            w_mob: Some(0.0),
+            ..Default::default()
+        };
+        validate(&input, &caps(), &Limits::default(), 1)
+            .unwrap()
+            .category_guidance_below
+    };
+    assert_eq!(below(None, 1.0), 1000);
+    assert_eq!(below(None, 0.0), 500);
+    assert_eq!(below(Some(500), 1.0), 500);
+    assert_eq!(below(Some(1), 0.0), 1);
+}
+
+#[test]
+fn accepts_defaults_and_materialises_the_seed() {
+    let input = JobInput {
+        points: Some(cloud(16)),
+        ..Default::default()
+    };
+    let s = validate(&input, &caps(), &Limits::default(), 77).unwrap();
+    // physnap's fast default: DDIM over 200 steps, the last 100 guided (t < 500, as the
+    // paper's n_g = 500 of 1000), with the gradient clamp.
+    assert_eq!((s.seed, s.samples, s.steps, s.n_g), (77, 1, 200, 100));
+    assert_eq!(
+        (s.tau, s.sampler.name(), s.sampler.eta()),
+        (1000.0, "ddim", 0.0)
+    );
+    assert_eq!(s.sampler, Sampler::Ddim { eta: 0.0 });
+    assert_eq!(s.guidance_max_step, Some(DEFAULT_MAX_STEP));
+    assert_eq!(s.refine_steps, 30);
+    assert_eq!(s.refine_physics_steps, 0);
+    assert_eq!((s.w_pc, s.w_pen, s.w_mob), (15.0, 2.0, 2.0));
+    assert!(s.guided());
+    // Exactly the last 100 of the 200 strided times are guided, as with the CLI's
+    // `--guidance-steps 500` (t < 500).
+    let th = s.guidance_threshold(1000);
+    let times = timesteps(1000, 200);
+    assert_eq!(times.iter().filter(|&&t| t < th).count(), 100);
+    assert_eq!(times.iter().filter(|&&t| t < 500).count(), 100);
+    assert_eq!(s.points.len(), 16);
+    // The paper's sampler is one field away.
+    let paper = JobInput {
+        sampler: Some("ddpm".into()),
+        steps: Some(1000),
+        ..input
+    };
+    let s = validate(&paper, &caps(), &Limits::default(), 77).unwrap();
+    assert_eq!((s.steps, s.n_g, s.sampler), (1000, 500, Sampler::Ddpm));
+    assert_eq!(s.guidance_threshold(1000), 500);
+}
+
+#[test]
+fn retrieval_auto_follows_the_codebook_and_explicit_modes_need_one() {
+    let input = |r: Option<&str>| JobInput {
+        points: Some(cloud(16)),
+        retrieval: r.map(str::to_string),
+        ..Default::default()
+    };
+    let without = ModelCaps {
+        codebook: false,
+        ..caps()
+    };
+    let l = Limits::default();
+    let run = |r, c: &ModelCaps| validate(&input(r), c, &l, 0).map(|s| s.retrieval);
+    assert_eq!(run(None, &caps()).unwrap().as_str(), "empty");
+    assert_eq!(run(Some("auto"), &caps()).unwrap().as_str(), "empty");
+    assert_eq!(run(Some("all"), &caps()).unwrap().as_str(), "all");
+    assert_eq!(run(None, &without).unwrap().as_str(), "off");
+    assert_eq!(run(Some("off"), &without).unwrap().as_str(), "off");
+    let v = run(Some("all"), &without).unwrap_err();
+    assert_eq!(
+        (v.field.as_str(), v.value.as_str()),
+        ("retrieval", "\"all\"")
+    );
+    assert!(v.limit.contains("no codebook"), "{v}");
+    let s = validate(&input(Some("all")), &caps(), &l, 0).unwrap();
+    assert_eq!(s.retrieval, Retrieval::All);
+    // "category" needs a category that has codes in the codebook.
+    let with = |r: &str, c: Option<&str>| JobInput {
+        category: c.map(str::to_string),
+        ..input(Some(r))
+    };
+    let s = validate(&with("category", Some("Window")), &caps(), &l, 0).unwrap();
+    assert_eq!(s.retrieval, Retrieval::Category);
+    let v = validate(&with("category", None), &caps(), &l, 0).unwrap_err();
+    assert_eq!(
+        (v.field.as_str(), v.value.as_str()),
+        ("retrieval", "\"category\" without a category")
+    );
+    let v = validate(&with("category", Some("Door")), &caps(), &l, 0).unwrap_err();
+    assert_eq!(v.value, "\"category\" with category Door");
+    assert!(
+        v.limit.contains("training codes in the codebook: Window"),
+        "{v}"
+    );
+    let plain = ModelCaps {
+        codebook_categories: Vec::new(),
+        ..caps()
+    };
+    let v = validate(&with("category", Some("Window")), &plain, &l, 0).unwrap_err();
+    assert!(v.limit.contains("carry categories"), "{v}");
+}
+
+#[test]
+fn joint_motion_defaults_and_a_bad_name_is_refused() {
+    let input = |m: Option<&str>| JobInput {
+        points: Some(cloud(16)),
+        joint_motion: m.map(str::to_string),
+        ..Default::default()
+    };
+    let l = Limits::default();
+    let run = |m| validate(&input(m), &caps(), &l, 0);
+    assert_eq!(run(None).unwrap().joint_motion, DEFAULT_JOINT_MOTION);
+    assert_eq!(run(Some("")).unwrap().joint_motion, DEFAULT_JOINT_MOTION);
+    let s = run(Some("dominant")).unwrap();
+    assert_eq!(s.joint_motion, JointMotion::Dominant);
+    assert_eq!(run(Some("screw")).unwrap().joint_motion, JointMotion::Screw);
+    let v = run(Some("revolute")).unwrap_err();
+    assert_eq!(
+        (v.field.as_str(), v.limit.as_str(), v.value.as_str()),
+        ("joint_motion", "\"screw\" or \"dominant\"", "\"revolute\"")
+    );
+}
+
+#[test]
+fn weight_defaults_follow_the_papers_rule_for_the_active_terms() {
+    // The paper's base ÷ active terms (45/2 and 2/2 here), ℓ_mob × 3 (physnap's default).
+    let input = JobInput {
+        points: Some(cloud(16)),
+        w_pen: Some(0.0),
+        ..Default::default()
+    };
+    let s = validate(&input, &caps(), &Limits::default(), 0).unwrap();
+    assert_eq!((s.w_pc, s.w_pen, s.w_mob), (22.5, 0.0, 3.0));
+    let input = JobInput {
+        points: Some(cloud(16)),
+        w_pc: Some(0.0),
+        w_pen: Some(0.0),
+        w_mob: Some(0.0),
+        ..Default::default()
+    };
+    assert!(
+        !validate(&input, &caps(), &Limits::default(), 0)
+            .unwrap()
+            .guided()
+    );
+}
+
+#[test]
+fn n_g_scales_with_steps_and_guides_the_last_n_g_reverse_steps() {
+    let input = JobInput {
+        points: Some(cloud(16)),
+        sampler: Some("ddim".into()),
+        eta: Some(0.5),
+        steps: Some(20),
+        ..Default::default()
+    };
+    let s = validate(&input, &caps(), &Limits::default(), 0).unwrap();
+    assert_eq!((s.steps, s.n_g), (20, 10));
+    // The gradient clamp is on by default; 0 asks for the paper's raw step.
+    assert_eq!(s.guidance_max_step, Some(DEFAULT_MAX_STEP));
+    let raw = JobInput {
+        guidance_max_step: Some(0.0),
+        ..input.clone()
+    };
+    let raw = validate(&raw, &caps(), &Limits::default(), 0).unwrap();
+    assert_eq!(raw.guidance_max_step, None);
+    assert_eq!(s.sampler, Sampler::Ddim { eta: 0.5 });
+    // Exactly the last n_g of the strided times fall below the threshold, and that is
+    // the CLI's `--guidance-steps 500` for the default.
+    for n_g in [0, 1, 7, 10, 20] {
+        let s = JobSpec { n_g, ..s.clone() };
+        let th = s.guidance_threshold(1000);
+        let guided = timesteps(1000, 20).into_iter().filter(|&t| t < th).count();
+        assert_eq!(guided, n_g as usize, "n_g {n_g}");
+    }
+    let cli = timesteps(1000, 20).into_iter().filter(|&t| t < 500).count();
+    assert_eq!(cli, 10);
+    let s = JobSpec {
+        n_g: 1000,
+        steps: 1000,
+        ..s
+    };
+    assert_eq!(s.guidance_threshold(1000), 1000);
+}
+
+#[test]
+fn each_limit_names_field_limit_and_value() {
+    let l = Limits::default();
+    let bad = |f: &dyn Fn(&mut JobInput)| {
+        let mut i = JobInput {
+            points: Some(cloud(20)),
+            ..Default::default()
+        };
+        f(&mut i);
+        validate(&i, &caps(), &l, 0).unwrap_err()
+    };
+    let v = bad(&|i| i.points = Some(cloud(15)));
+    assert_eq!(
+        (v.field.as_str(), v.value.as_str()),
+        ("points", "15 points")
+    );
+    assert!(v.limit.contains("16..=100000"));
+    let v = bad(&|i| i.w_pen = Some(-1.0));
+    assert_eq!((v.field.as_str(), v.value.as_str()), ("w_pen", "-1"));
+    assert!(v.limit.contains(">= 0"));
+    let v = bad(&|i| i.category = Some("Spaceship".into()));
+    assert_eq!(v.field, "category");
+    assert!(v.limit.contains("Door, Window"), "{v}");
+    let mut flat = vec![0.5f32; 60];
+    flat[4] = f32::NAN;
+    let v = bad(&|i| i.points = Some(PointsInput::Flat(flat.clone())));
+    assert_eq!(
+        (v.field.as_str(), v.limit.as_str()),
+        ("points[1][1]", "finite")
+    );
+    let v = bad(&|i| i.samples = Some(0));
+    assert_eq!(v.field, "samples");
+    let v = bad(&|i| i.steps = Some(0));
+    assert_eq!((v.field.as_str(), v.value.as_str()), ("steps", "0"));
+    let v = bad(&|i| i.steps = Some(1001));
+    assert_eq!((v.field.as_str(), v.value.as_str()), ("steps", "1001"));
+    assert!(v.limit.contains("1..=1000"), "{v}");
+    let v = bad(&|i| {
+        i.steps = Some(20);
+        i.n_g = Some(21);
+    });
+    assert_eq!((v.field.as_str(), v.value.as_str()), ("n_g", "21"));
+    assert!(v.limit.contains("<= steps (20)"), "{v}");
+    for (tau, shown) in [(0.0, "0"), (-1.0, "-1"), (f64::NAN, "NaN")] {
+        let v = bad(&|i| i.tau = Some(tau));
+        assert_eq!((v.field.as_str(), v.value.as_str()), ("tau", shown));
+        assert!(v.limit.contains("> 0"), "{v}");
+    }
+    for (w, shown) in [(-0.5, "-0.5"), (21.0, "21"), (f64::INFINITY, "inf")] {
+        let v = bad(&|i| {
+            i.category = Some("Door".into());
+            i.category_guidance = Some(w);
+        });
+        assert_eq!(
+            (v.field.as_str(), v.value.as_str()),
+            ("category_guidance", shown)
+        );
+        assert!(v.limit.contains("[0, 20]"), "{v}");
+    }
+    let v = bad(&|i| i.category_guidance = Some(3.0));
+    assert_eq!(
+        (v.field.as_str(), v.limit.as_str(), v.value.as_str()),
+        ("category_guidance", "0 or absent without a category", "3")
+    );
+    for b in [0, 1001] {
+        let v = bad(&|i| i.category_guidance_below = Some(b));
+        assert_eq!(
+            (v.field.as_str(), v.limit.as_str(), v.value.as_str()),
+            (
+                "category_guidance_below",
+                "in [1, 1000]",
+                b.to_string().as_str()
+            )
+        );
+    }
+    let v = bad(&|i| i.retrieval = Some("nearest".into()));
+    assert_eq!(
+        (v.field.as_str(), v.value.as_str()),
+        ("retrieval", "\"nearest\"")
+    );
+    assert!(v.limit.contains("\"empty\""), "{v}");
+    let v = bad(&|i| i.sampler = Some("euler".into()));
+    assert_eq!(
+        (v.field.as_str(), v.value.as_str()),
+        ("sampler", "\"euler\"")
+    );
+    assert!(v.limit.contains("ddim"), "{v}");
+    let v = bad(&|i| {
+        i.sampler = Some("ddpm".into());
+        i.eta = Some(0.5);
+    });
+    assert_eq!(v.field, "eta");
+    let v = bad(&|i| {
+        i.sampler = Some("ddim".into());
+        i.eta = Some(1.5);
+    });
+    assert_eq!((v.field.as_str(), v.value.as_str()), ("eta", "1.5"));
+    for (c, shown) in [(-1.0, "-1"), (f64::INFINITY, "inf")] {
+        let v = bad(&|i| i.guidance_max_step = Some(c));
+        assert_eq!(
+            (v.field.as_str(), v.value.as_str()),
+            ("guidance_max_step", shown)
+        );
+        assert!(v.limit.contains(">= 0"), "{v}");
+    }
+    let v = bad(&|i| i.refine_steps = Some(1001));
+    assert_eq!(
+        (v.field.as_str(), v.value.as_str(), v.limit.as_str()),
+        ("refine_steps", "1001", "<= 1000 (0: off)")
+    );
+    let v = bad(&|i| i.refine_physics_steps = Some(1001));
+    assert_eq!(
+        (v.field.as_str(), v.value.as_str(), v.limit.as_str()),
+        ("refine_physics_steps", "1001", "<= 1000 (0: off)")
+    );
+    let v = bad(&|i| i.points = Some(PointsInput::F32Le(vec![0; 13])));
+    assert!(v.limit.contains("multiple of 12"));
+    let v = bad(&|i| i.points = Some(PointsInput::Ply(b"ply\nformat nonsense\n".to_vec())));
+    assert_eq!(v.field, "points");
+    assert!(v.value.contains("PLY"), "{v}");
+}

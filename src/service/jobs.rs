@@ -1,4 +1,5 @@
-//! The job service core: admission, the bounded queue, the worker pool, cancellation, events.
+//! The job service core: admission, the worker pool, cancellation, events (the queue's own
+//! state and rules are [`super::queue::QueueState`]).
 //!
 //! Why it exists: REST and gRPC are thin adapters over this one [`Service`], so both transports
 //! share one queue, one store, one set of limits and one event log. The rules it enforces:
@@ -18,7 +19,7 @@
 //! - **Durability**: a job found QUEUED or RUNNING at start-up is re-queued (attempt + 1); the
 //!   seed is part of the job, so the re-run writes the same bytes. Disconnects never cancel.
 
-use std::collections::{HashMap, VecDeque};
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
@@ -28,6 +29,7 @@ use sha2::{Digest, Sha256};
 use tokio::sync::{Notify, OwnedSemaphorePermit, Semaphore, mpsc, watch};
 
 use super::api::{self, JobList, JobView, ProgressView};
+use super::queue::{Full, QueueState};
 use super::runner::{Models, Progress, RunError, run_job};
 use super::spec::{JobInput, Limits, ModelCaps, Violation, validate};
 use super::store::{Artifact, JobFailure, JobRecord, JobState, Store, StoreError, StoredEvent};
@@ -205,7 +207,7 @@ pub struct Service {
     models: Arc<Models>,
     caps: ModelCaps,
     pool: Arc<rayon::ThreadPool>,
-    queue: Mutex<VecDeque<String>>,
+    queue: Mutex<QueueState>,
     wake: Notify,
     slots: Arc<Semaphore>,
     live: Mutex<HashMap<String, Live>>,
@@ -288,6 +290,7 @@ impl Service {
             }),
         };
         let (shutdown_tx, _) = watch::channel(false);
+        let queue = Mutex::new(QueueState::new(cfg.queue_capacity));
         let svc = Arc::new(Service {
             slots: Arc::new(Semaphore::new(cfg.max_running_jobs.max(1))),
             cfg,
@@ -295,7 +298,7 @@ impl Service {
             models: Arc::new(models),
             caps,
             pool: Arc::new(pool),
-            queue: Mutex::new(VecDeque::new()),
+            queue,
             wake: Notify::new(),
             live: Mutex::new(HashMap::new()),
             draining: AtomicBool::new(false),
@@ -320,7 +323,7 @@ impl Service {
                 store.update(&rec, &evs)?;
             }
             self.add_live(&rec);
-            lock(&self.queue).push_back(rec.id.clone());
+            lock(&self.queue).requeue(rec.id.clone());
             self.metrics.recovered.fetch_add(1, Ordering::Relaxed);
             tracing::info!(job = %rec.id, attempt = rec.attempt, "re-queued interrupted job");
         }
@@ -459,11 +462,10 @@ impl Service {
             drop(store);
             return Ok((self.view(&rec), false));
         }
-        let queued = self.queued();
-        if queued >= self.cfg.queue_capacity {
+        if let Err(Full { queued, capacity }) = lock(&self.queue).check_admit() {
             return Err(ServiceError::QueueFull {
                 queued,
-                capacity: self.cfg.queue_capacity,
+                capacity,
                 retry_after: self.cfg.retry_after_seconds,
             });
         }
@@ -490,7 +492,7 @@ impl Service {
         )?;
         drop(store);
         self.add_live(&rec);
-        lock(&self.queue).push_back(rec.id.clone());
+        lock(&self.queue).push(rec.id.clone());
         tracing::info!(job = %rec.id, tenant, seed = rec.spec.seed, "job admitted");
         Ok((self.view(&rec), true))
     }
@@ -560,12 +562,7 @@ impl Service {
         if let Some(l) = lock(&self.live).get(id) {
             l.cancel.store(true, Ordering::Relaxed);
         }
-        let removed = {
-            let mut q = lock(&self.queue);
-            let before = q.len();
-            q.retain(|j| j != id);
-            q.len() != before
-        };
+        let removed = lock(&self.queue).remove(id);
         if removed {
             rec.state = JobState::Cancelled;
             rec.ended_ms = Some(now_ms());
@@ -752,7 +749,7 @@ impl Service {
                 if self.is_draining() {
                     return;
                 }
-                if let Some(id) = lock(&self.queue).pop_front() {
+                if let Some(id) = lock(&self.queue).pop() {
                     break id;
                 }
                 self.wake.notified().await;

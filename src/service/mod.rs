@@ -17,6 +17,7 @@ pub mod auth;
 pub mod grpc;
 pub mod http;
 pub mod jobs;
+pub mod queue;
 pub mod runner;
 pub mod server;
 pub mod spec;

@@ -17,6 +17,7 @@ mod client_cmd;
 mod data_cmd;
 mod eval_cmd;
 mod model_cmd;
+mod real_cmd;
 mod serve_cmd;
 
 // mimalloc instead of glibc malloc: the ML stack allocates and frees many short-lived buffers
@@ -99,6 +100,10 @@ enum EvalCommand {
     /// category and with the "no category" row: generalisation and category use in about a
     /// minute, without sampling (paired: the same seed gives every model the same inputs).
     Denoiser(EvalDenoiserArgs),
+    /// Real-scan metrics (real-scans.md §3) on a benchmark set: parts and joint types exact,
+    /// axis and hinge errors, Chamfer/diag, sim-clean in MuJoCo, seconds; per object, per
+    /// category and overall, for the prior, guided and best-of-N rows. Writes real.md/json.
+    Real(Box<real_cmd::EvalRealArgs>),
 }
 
 #[derive(Args, Debug)]
@@ -1085,6 +1090,7 @@ fn run(command: Command) -> anyhow::Result<()> {
             EvalCommand::Shape(a) => eval_cmd::shape(a),
             EvalCommand::Reconstruction(a) => eval_cmd::reconstruction(a),
             EvalCommand::Denoiser(a) => eval_cmd::denoiser(a),
+            EvalCommand::Real(a) => real_cmd::eval_real(*a),
         },
     }
 }

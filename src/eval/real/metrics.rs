@@ -400,14 +400,16 @@ mod tests {
             .collect();
         assert_eq!(meshes.len(), 3);
         let same = chamfer_diag(&meshes, &gt, &meshes, 7);
-        // Two independent samples of one surface: only the sampling gap remains.
-        assert!(same < 0.01, "{same}");
+        // Two independent samples of one surface: only the sampling gap remains (≈ half the
+        // spacing of 2048 points on this 1 m cabinet's 8.5 m², 0.018 diagonals: the metric's
+        // floor for an object of this size).
+        assert!(same < 0.025, "{same}");
         let moved: Vec<TriMesh> = meshes
             .iter()
-            .map(|m| m.map_positions(|p| [p[0] + 0.2, p[1], p[2]]))
+            .map(|m| m.clone().map_positions(|p| [p[0] + 0.2, p[1], p[2]]))
             .collect();
         let off = chamfer_diag(&moved, &gt, &meshes, 7);
-        assert!(off > 0.03, "{off}");
+        assert!(off > 2.0 * same, "{off} vs {same}");
         assert!(chamfer_diag(&[], &gt, &meshes, 7).is_nan());
         // The same points in both sets: exactly 0.
         let p = surface_points(&meshes, 64, &mut Rng::new(1));
@@ -426,6 +428,6 @@ mod tests {
         assert!(m.parts_exact() && m.types_exact());
         assert!(m.joints.iter().all(|j| j.axis_ok()));
         assert!(m.joints[0].pivot_ok());
-        assert!(m.chamfer_diag < 0.01);
+        assert!(m.chamfer_diag < 0.025);
     }
 }

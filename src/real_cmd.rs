@@ -32,8 +32,7 @@ use physnap::eval::real::{
 use physnap::export::{ExportOptions, export_dir};
 use physnap::io::manifest::load_models;
 use physnap::io::real::{
-    ScanRecord, read_scan_result, read_scan_set, scan_json, sim_check, sim_probe,
-    write_json,
+    ScanRecord, read_scan_result, read_scan_set, scan_json, sim_check, sim_probe, write_json,
 };
 use physnap::mesh::MeshingOptions;
 use physnap::model::shape_prior::LatentSdfDecoder;
@@ -155,7 +154,8 @@ pub fn eval_real(a: EvalRealArgs) -> anyhow::Result<()> {
     }
     let scan_dir = a.scans.clone().unwrap_or_else(|| a.data.join("scans"));
     let scans = select(
-        read_scan_set(&scan_dir).with_context(|| format!("reading scans of {}", scan_dir.display()))?,
+        read_scan_set(&scan_dir)
+            .with_context(|| format!("reading scans of {}", scan_dir.display()))?,
         a.views,
         a.max_objects,
     );
@@ -195,7 +195,10 @@ pub fn eval_real(a: EvalRealArgs) -> anyhow::Result<()> {
         .with_context(|| format!("loading weights from {}", a.weights.display()))?;
     let conditional = models.manifest.denoiser.config.categories > 0;
     if blocks.contains(&true) && !conditional {
-        bail!("invalid --category-aware {}: the weights' denoiser has no category input", a.category_aware);
+        bail!(
+            "invalid --category-aware {}: the weights' denoiser has no category input",
+            a.category_aware
+        );
     }
     let retrieval = super::model_cmd::retrieval_mode(&a.sampling.retrieval, &models)?;
     let joint_motion = super::model_cmd::joint_motion(&a.sampling.joint_motion)?;
@@ -253,10 +256,7 @@ pub fn eval_real(a: EvalRealArgs) -> anyhow::Result<()> {
         let points = PointCloud::read(&scan.cloud, &limits)
             .with_context(|| format!("reading {}", scan.cloud.display()))?
             .points;
-        let category = scan
-            .category
-            .clone()
-            .or_else(|| gt.object.category.clone());
+        let category = scan.category.clone().or_else(|| gt.object.category.clone());
         let mut jobs: Vec<JobResult> = Vec::new();
         let mut done = si * per_scan;
         for &aware in &blocks {
@@ -269,7 +269,11 @@ pub fn eval_real(a: EvalRealArgs) -> anyhow::Result<()> {
             } else {
                 None
             };
-            let mine: Vec<RowSpec> = rows.iter().copied().filter(|r| r.category_aware == aware).collect();
+            let mine: Vec<RowSpec> = rows
+                .iter()
+                .copied()
+                .filter(|r| r.category_aware == aware)
+                .collect();
             if aware && cat.is_none() {
                 for r in mine {
                     jobs.push(failed_job(r, "the scan has no category the weights know"));
@@ -286,7 +290,11 @@ pub fn eval_real(a: EvalRealArgs) -> anyhow::Result<()> {
                 meshing,
                 sampler,
                 steps: a.sampling.steps,
-                retrieval: if cat.is_some() { retrieval } else { retrieval.without_category() },
+                retrieval: if cat.is_some() {
+                    retrieval
+                } else {
+                    retrieval.without_category()
+                },
                 joint_motion,
                 ..Default::default()
             };
@@ -298,8 +306,14 @@ pub fn eval_real(a: EvalRealArgs) -> anyhow::Result<()> {
                 };
                 let d0 = done;
                 let s = draw_samples(
-                    &models.denoiser, &shapes, &models.manifest.feature_scales, &schedule, &req,
-                    1, &points, &mut |k| pb.set_position((d0 + k) as u64),
+                    &models.denoiser,
+                    &shapes,
+                    &models.manifest.feature_scales,
+                    &schedule,
+                    &req,
+                    1,
+                    &points,
+                    &mut |k| pb.set_position((d0 + k) as u64),
                 )?;
                 done += 1;
                 s
@@ -327,8 +341,14 @@ pub fn eval_real(a: EvalRealArgs) -> anyhow::Result<()> {
                 };
                 let d0 = done;
                 let s = draw_samples(
-                    &models.denoiser, &shapes, &models.manifest.feature_scales, &schedule, &req,
-                    n_guided, &points, &mut |k| pb.set_position((d0 + k) as u64),
+                    &models.denoiser,
+                    &shapes,
+                    &models.manifest.feature_scales,
+                    &schedule,
+                    &req,
+                    n_guided,
+                    &points,
+                    &mut |k| pb.set_position((d0 + k) as u64),
                 )?;
                 done += n_guided;
                 s
@@ -349,7 +369,16 @@ pub fn eval_real(a: EvalRealArgs) -> anyhow::Result<()> {
             .iter()
             .enumerate()
             .filter(|(_, j)| j.error.is_none())
-            .map(|(i, j)| (i, a.out.join("jobs").join(&scan.id).join(j.row.key()).join("robot.urdf")))
+            .map(|(i, j)| {
+                (
+                    i,
+                    a.out
+                        .join("jobs")
+                        .join(&scan.id)
+                        .join(j.row.key())
+                        .join("robot.urdf"),
+                )
+            })
             .collect();
         let t = Instant::now();
         let verdicts = sim_check(
@@ -385,12 +414,20 @@ pub fn eval_real(a: EvalRealArgs) -> anyhow::Result<()> {
                     m.gt_parts,
                     m.types,
                     m.chamfer_diag,
-                    j.sim.as_ref().map_or("—", |s| if s.clean { "clean" } else { "no" })
+                    j.sim
+                        .as_ref()
+                        .map_or("—", |s| if s.clean { "clean" } else { "no" })
                 ),
                 (e, _) => format!("{}: failed ({})", j.row.key(), e.as_deref().unwrap_or("")),
             })
             .collect();
-        pb.println(format!("{} [{}/{}] {}", scan.id, si + 1, scans.len(), line.join("; ")));
+        pb.println(format!(
+            "{} [{}/{}] {}",
+            scan.id,
+            si + 1,
+            scans.len(),
+            line.join("; ")
+        ));
         results.push(r);
         pb.set_position(((si + 1) * per_scan) as u64);
     }
@@ -401,7 +438,11 @@ pub fn eval_real(a: EvalRealArgs) -> anyhow::Result<()> {
         a.weights.display(),
         a.data.display(),
         wall.round(),
-        if resumed > 0 { format!(", {resumed} scans resumed") } else { String::new() }
+        if resumed > 0 {
+            format!(", {resumed} scans resumed")
+        } else {
+            String::new()
+        }
     );
     let md = report::markdown(&title, &results);
     print!("{md}");
@@ -449,7 +490,10 @@ fn job(
         return r;
     };
     let s = &samples[b];
-    let g = s.outcome.as_ref().expect("best_of picks a sample with an object");
+    let g = s
+        .outcome
+        .as_ref()
+        .expect("best_of picks a sample with an object");
     r.best = Some((s.index, s.seed));
     r.d_pc = s.d_pc;
     let opts = ExportOptions {
@@ -474,7 +518,15 @@ fn job(
 
 fn summary_json(s: &physnap::eval::real::Summary) -> serde_json::Value {
     use physnap::eval::real::Summary as S;
-    let num = |v: f64| if v.is_finite() { json!(v) } else if v.is_infinite() { json!("inf") } else { serde_json::Value::Null };
+    let num = |v: f64| {
+        if v.is_finite() {
+            json!(v)
+        } else if v.is_infinite() {
+            json!("inf")
+        } else {
+            serde_json::Value::Null
+        }
+    };
     json!({
         "jobs": s.jobs, "failed": s.failed,
         "parts_exact": num(S::share(s.parts_exact, s.jobs)), "parts_exact_count": s.parts_exact,

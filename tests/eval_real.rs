@@ -143,7 +143,11 @@ fn sim_check_tells_clean_jammed_swept_into_and_refused_urdfs_apart() {
     assert_eq!(r[0]["clean"], true, "{}", r[0]);
     assert_eq!(r[0]["joints"], 1);
     assert_eq!(r[1]["clean"], false);
-    assert!((r[1]["rest_depth"].as_f64().unwrap() - 0.07).abs() < 1e-3, "{}", r[1]);
+    assert!(
+        (r[1]["rest_depth"].as_f64().unwrap() - 0.07).abs() < 1e-3,
+        "{}",
+        r[1]
+    );
     // Parent and child collide (MuJoCo's parent filter is off).
     assert_eq!(r[1]["worst"]["bodies"], serde_json::json!(["base", "door"]));
     assert_eq!(r[2]["clean"], false);
@@ -151,7 +155,11 @@ fn sim_check_tells_clean_jammed_swept_into_and_refused_urdfs_apart() {
     assert!(r[2]["sweep_depth"].as_f64().unwrap() > 0.1, "{}", r[2]);
     assert_eq!(r[3]["compiled"], false);
     assert_eq!(r[3]["clean"], false);
-    assert!(r[3]["error"].as_str().unwrap().contains("missing"), "{}", r[3]);
+    assert!(
+        r[3]["error"].as_str().unwrap().contains("missing"),
+        "{}",
+        r[3]
+    );
 }
 
 #[test]
@@ -179,7 +187,16 @@ fn eval_real_on_two_procedural_objects_resumes_and_refuses_other_settings() {
         root.join("weights"),
         root.join("out"),
     );
-    ok(&["data", "synth", "--out", s(&src), "--objects", "2", "--seed", "99"]);
+    ok(&[
+        "data",
+        "synth",
+        "--out",
+        s(&src),
+        "--objects",
+        "2",
+        "--seed",
+        "99",
+    ]);
     ok(&[
         "data",
         "import",
@@ -248,7 +265,10 @@ fn eval_real_on_two_procedural_objects_resumes_and_refuses_other_settings() {
     assert_eq!(report["format"], "physnap.eval_real/v1");
     let rows = report["rows"].as_array().unwrap();
     let keys: Vec<&str> = rows.iter().map(|r| r["row"].as_str().unwrap()).collect();
-    assert_eq!(keys, ["prior+category", "guided+category", "best-of-2+category"]);
+    assert_eq!(
+        keys,
+        ["prior+category", "guided+category", "best-of-2+category"]
+    );
     for r in rows {
         assert_eq!(r["overall"]["jobs"], 2, "{r}");
         assert_eq!(r["objects"].as_object().unwrap().len(), 2);
@@ -278,10 +298,11 @@ fn eval_real_on_two_procedural_objects_resumes_and_refuses_other_settings() {
                 assert!(m["chamfer_diag"].as_f64().unwrap() > 0.0);
             }
         }
-        assert!(out
-            .join("scans")
-            .join(format!("{}.json", sc["scan"].as_str().unwrap()))
-            .is_file());
+        assert!(
+            out.join("scans")
+                .join(format!("{}.json", sc["scan"].as_str().unwrap()))
+                .is_file()
+        );
     }
     // A second run resumes from the per-scan files.
     let again = ok(&args);

@@ -474,7 +474,10 @@ mod tests {
         let s = read_scan_set(&dir.join("b")).unwrap();
         assert_eq!(s.len(), 1);
         assert_eq!((s[0].object.as_str(), s[0].view), ("obj_7", 0));
-        assert_eq!((s[0].id.as_str(), s[0].camera), ("obj_7", Some([0.0, 0.0, 2.0])));
+        assert_eq!(
+            (s[0].id.as_str(), s[0].camera),
+            ("obj_7", Some([0.0, 0.0, 2.0]))
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

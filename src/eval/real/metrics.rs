@@ -64,7 +64,10 @@ pub fn axis_angle_deg(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
     if na == 0.0 || nb == 0.0 || !na.is_finite() || !nb.is_finite() {
         return f64::NAN;
     }
-    (a.dot(b).abs() / (na * nb)).clamp(0.0, 1.0).acos().to_degrees()
+    (a.dot(b).abs() / (na * nb))
+        .clamp(0.0, 1.0)
+        .acos()
+        .to_degrees()
 }
 
 /// Distance from `p` to the line through `origin` along `axis` (NaN for a zero axis).

@@ -61,12 +61,12 @@ pub fn row_keys(scans: &[ScanResult]) -> Vec<String> {
 
 /// The summary of row `key` over the scans that `keep` selects.
 pub fn row_summary(scans: &[ScanResult], key: &str, keep: &dyn Fn(&ScanResult) -> bool) -> Summary {
-    summarise(
-        scans
+    summarise(scans.iter().filter(|s| keep(s)).flat_map(|s| {
+        s.jobs
             .iter()
-            .filter(|s| keep(s))
-            .flat_map(|s| s.jobs.iter().filter(|j| j.row.key() == key).map(move |j| (s, j))),
-    )
+            .filter(|j| j.row.key() == key)
+            .map(move |j| (s, j))
+    }))
 }
 
 /// Sorted categories of the scans (`—` for scans without one).
@@ -99,7 +99,9 @@ pub fn markdown(title: &str, scans: &[ScanResult]) -> String {
     for k in &keys {
         md += &format!("| {k} {}\n", cells(&row_summary(scans, k, &|_| true)));
     }
-    md += &format!("\n## Per category\n\n| row | category {HEADER}\n|---|---|---|---|---|---|---|---|---|---|---|\n");
+    md += &format!(
+        "\n## Per category\n\n| row | category {HEADER}\n|---|---|---|---|---|---|---|---|---|---|---|\n"
+    );
     for k in &keys {
         for c in categories(scans) {
             let s = row_summary(scans, k, &|s: &ScanResult| {

@@ -236,15 +236,16 @@ pub fn eval_real(a: EvalRealArgs) -> anyhow::Result<()> {
     };
     for (si, scan) in scans.iter().enumerate() {
         let result_path = a.out.join("scans").join(format!("{}.json", scan.id));
-        if !a.fresh && result_path.is_file() {
-            if let Ok(r) = read_scan_result(&result_path) {
-                if r.jobs.iter().map(|j| j.row).eq(rows.iter().copied()) {
-                    results.push(r);
-                    resumed += 1;
-                    pb.set_position(((si + 1) * per_scan) as u64);
-                    continue;
-                }
-            }
+        // Resume: a finished scan of this run's rows (settings.json vouches for the rest).
+        if !a.fresh
+            && result_path.is_file()
+            && let Ok(r) = read_scan_result(&result_path)
+            && r.jobs.iter().map(|j| j.row).eq(rows.iter().copied())
+        {
+            results.push(r);
+            resumed += 1;
+            pb.set_position(((si + 1) * per_scan) as u64);
+            continue;
         }
         if !gts.contains_key(&scan.object) {
             let dir = a.data.join("objects").join(&scan.object);

@@ -48,8 +48,9 @@ pub struct EvalRealArgs {
     /// Weights directory with manifest.json.
     #[arg(long, env = "PHYSNAP_WEIGHTS", default_value = "weights")]
     weights: PathBuf,
-    /// Benchmark set: an imported data set (dataset.json, objects/<id>/: the ground truth) with
-    /// its scans in DATA/scans (see --scans).
+    /// Benchmark set: an imported data set (dataset.json, objects/<id>/: the ground truth), or
+    /// a folder with it as DATA/dataset (scripts/real-assets.sh's layout); scans in DATA/scans
+    /// (see --scans).
     #[arg(long, env = "PHYSNAP_DATA")]
     data: PathBuf,
     /// Scan folder (default DATA/scans): per-scan `<object>_<view>.json` records (object,
@@ -152,7 +153,16 @@ pub fn eval_real(a: EvalRealArgs) -> anyhow::Result<()> {
     if rows.is_empty() {
         bail!("invalid --rows {:?} with --samples 1: no row left", a.rows);
     }
+    // DATA is the imported data set, or a folder holding it as DATA/dataset next to DATA/scans
+    // (scripts/real-assets.sh's layout).
     let scan_dir = a.scans.clone().unwrap_or_else(|| a.data.join("scans"));
+    let dataset = if !a.data.join("dataset.json").is_file()
+        && a.data.join("dataset").join("dataset.json").is_file()
+    {
+        a.data.join("dataset")
+    } else {
+        a.data.clone()
+    };
     let scans = select(
         read_scan_set(&scan_dir)
             .with_context(|| format!("reading scans of {}", scan_dir.display()))?,
@@ -248,7 +258,7 @@ pub fn eval_real(a: EvalRealArgs) -> anyhow::Result<()> {
             continue;
         }
         if !gts.contains_key(&scan.object) {
-            let dir = a.data.join("objects").join(&scan.object);
+            let dir = dataset.join("objects").join(&scan.object);
             let (object, meshes) = load_object_meshes(&dir)
                 .with_context(|| format!("ground truth of scan {}", scan.id))?;
             gts.insert(scan.object.clone(), GtObject { object, meshes });

@@ -7,8 +7,16 @@ mod support;
 use std::path::Path;
 use std::process::{Command, Output};
 
+/// PHYSNAP_PYTHON, else .ci/setup's tests/tools/mjvenv, else python3.
 fn python() -> String {
-    std::env::var("PHYSNAP_PYTHON").unwrap_or_else(|_| "python3".into())
+    let venv = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/tools/mjvenv/bin/python");
+    std::env::var("PHYSNAP_PYTHON").unwrap_or_else(|_| {
+        if Path::new(venv).is_file() {
+            venv.into()
+        } else {
+            "python3".into()
+        }
+    })
 }
 
 fn physnap(args: &[&str]) -> Output {

@@ -113,16 +113,16 @@ fn record(
         .map(String::from)
         .or_else(|| parsed.as_ref().map(|p| p.0.clone()))
         .ok_or_else(|| malformed(path, "a scan record without an \"object\""))?;
-    let view = v["view"]
-        .as_u64()
-        .map(|x| x as usize)
-        .or_else(|| parsed.as_ref().filter(|p| p.0 == object).map(|p| p.1))
-        .unwrap_or(0);
-    let id = v["scan"]
-        .as_str()
-        .or_else(|| v["id"].as_str().filter(|_| v["object"].is_null()))
-        .map(String::from)
-        .unwrap_or_else(|| format!("{object}_{view}"));
+    // The view: `view`, or an integer `scan` (real-assets.sh's testset.json), or the cloud's
+    // `<object>_<view>` stem.
+    let explicit = v["view"].as_u64().or_else(|| v["scan"].as_u64());
+    let from_stem = parsed.as_ref().filter(|p| p.0 == object).map(|p| p.1);
+    let view = explicit.map(|x| x as usize).or(from_stem).unwrap_or(0);
+    let id = match v["scan"].as_str() {
+        Some(id) => id.to_string(),
+        None if explicit.is_some() || from_stem.is_some() => format!("{object}_{view}"),
+        None => object.clone(),
+    };
     Ok(ScanRecord {
         id,
         object,
@@ -141,7 +141,9 @@ fn record(
 ///
 /// A record holds `object` (or testset's `id`), `category`, `camera: [x, y, z]` (or testset's
 /// `eye`), `cloud` (file name in the folder; default: the record's own stem + `.ply`), and
-/// optionally `view` and `scan` (the id; default `<object>_<view>`).
+/// optionally `view` (or an integer `scan`, as scripts/real-assets.sh writes it). The scan id
+/// is a string `scan`, else `<object>_<view>` when the view is known (given, or the cloud's
+/// `<object>_<view>` stem), else the object id.
 pub fn read_scan_set(dir: &Path) -> Result<Vec<ScanRecord>, RealFileError> {
     let mut out = Vec::new();
     let index = ["scans.json", "testset.json"]
@@ -478,6 +480,21 @@ mod tests {
             (s[0].id.as_str(), s[0].camera),
             ("obj_7", Some([0.0, 0.0, 2.0]))
         );
+        // scripts/real-assets.sh's index: three views of one object, `scan` the view.
+        std::fs::create_dir_all(dir.join("c")).unwrap();
+        std::fs::write(
+            dir.join("c/testset.json"),
+            r#"{"clouds": [
+              {"id": "prpl_fridge", "category": "Refrigerator", "scan": 2, "cloud": "prpl_fridge_2.ply", "eye": [1, 1, 1]},
+              {"id": "prpl_fridge", "category": "Refrigerator", "scan": 0, "cloud": "prpl_fridge_0.ply", "eye": [1, 1, 1]},
+              {"id": "prpl_fridge", "category": "Refrigerator", "scan": 1, "cloud": "prpl_fridge_1.ply", "eye": [1, 1, 1]}]}"#,
+        )
+        .unwrap();
+        let s = read_scan_set(&dir.join("c")).unwrap();
+        let ids: Vec<&str> = s.iter().map(|r| r.id.as_str()).collect();
+        assert_eq!(ids, ["prpl_fridge_0", "prpl_fridge_1", "prpl_fridge_2"]);
+        assert!(s.iter().all(|r| r.object == "prpl_fridge"));
+        assert_eq!(s[1].cloud, dir.join("c/prpl_fridge_1.ply"));
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

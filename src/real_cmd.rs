@@ -119,7 +119,8 @@ fn settings(a: &EvalRealArgs, rows: &[RowSpec]) -> serde_json::Value {
     })
 }
 
-/// The scans to run: `--max-objects` objects, `--views` views each.
+/// The scans to run: `--max-objects` objects, `--views` views each, view-major (every object's
+/// first view, then every second view, ...), so a run stopped early covers every object.
 fn select(mut scans: Vec<ScanRecord>, views: usize, max_objects: usize) -> Vec<ScanRecord> {
     let mut objects: Vec<String> = scans.iter().map(|s| s.object.clone()).collect();
     objects.dedup();
@@ -132,6 +133,7 @@ fn select(mut scans: Vec<ScanRecord>, views: usize, max_objects: usize) -> Vec<S
         *n += 1;
         objects.contains(&s.object) && (views == 0 || *n <= views)
     });
+    scans.sort_by(|a, b| (a.view, &a.object, &a.id).cmp(&(b.view, &b.object, &b.id)));
     scans
 }
 
@@ -432,13 +434,19 @@ pub fn eval_real(a: EvalRealArgs) -> anyhow::Result<()> {
                 (e, _) => format!("{}: failed ({})", j.row.key(), e.as_deref().unwrap_or("")),
             })
             .collect();
-        pb.println(format!(
+        let msg = format!(
             "{} [{}/{}] {}",
             scan.id,
             si + 1,
             scans.len(),
             line.join("; ")
-        ));
+        );
+        // A hidden bar (no terminal) prints nothing: log the line instead.
+        if pb.is_hidden() {
+            tracing::info!("{msg}");
+        } else {
+            pb.println(msg);
+        }
         results.push(r);
         pb.set_position(((si + 1) * per_scan) as u64);
     }

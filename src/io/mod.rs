@@ -7,6 +7,7 @@ pub mod atomic;
 pub mod manifest;
 pub mod npy;
 pub mod object_json;
+pub mod real;
 
 /// Errors of the file-format layer.
 #[derive(Debug, thiserror::Error)]

@@ -4,6 +4,7 @@
 mod denoiser;
 mod generative;
 mod guided;
+mod real;
 mod reconstruction;
 mod shape;
 
@@ -13,6 +14,7 @@ use clap::Subcommand;
 use denoiser::EvalDenoiserArgs;
 use generative::EvalGenerativeArgs;
 use guided::EvalGuidedArgs;
+use real::EvalRealArgs;
 use physnap::data::dataset::load_object_meshes;
 use physnap::data::rng::Rng;
 use physnap::eval::generative::{IdOptions, StateClouds, state_clouds};
@@ -44,6 +46,10 @@ pub(crate) enum EvalCommand {
     /// category and with the "no category" row: generalisation and category use in about a
     /// minute, without sampling (paired: the same seed gives every model the same inputs).
     Denoiser(EvalDenoiserArgs),
+    /// Real-scan metrics (real-scans.md §3) on a benchmark set: parts and joint types exact,
+    /// axis and hinge errors, Chamfer/diag, sim-clean in MuJoCo, seconds; per object, per
+    /// category and overall, for the prior, guided and best-of-N rows. Writes real.md/json.
+    Real(Box<EvalRealArgs>),
 }
 
 /// Runs one `physnap eval …` subcommand.
@@ -54,6 +60,7 @@ pub(crate) fn run(command: EvalCommand) -> anyhow::Result<()> {
         EvalCommand::Shape(a) => shape::shape(a),
         EvalCommand::Reconstruction(a) => reconstruction::reconstruction(a),
         EvalCommand::Denoiser(a) => denoiser::denoiser(a),
+        EvalCommand::Real(a) => real::eval_real(*a),
     }
 }
 

@@ -15,7 +15,8 @@
 //!   step by the runner.
 //! - **Events**: state changes, artefacts and the terminal `done` are persisted with a
 //!   per-job sequence; progress goes through a `tokio::sync::watch` (latest wins, so slow
-//!   readers never buffer) and is not persisted. Watchers resume from any sequence.
+//!   readers never buffer) and is not persisted. Watchers resume from any sequence; the fan-out
+//!   to them is [`fanout`].
 //! - **Durability**: a job found QUEUED or RUNNING at start-up is re-queued (attempt + 1); the
 //!   seed is part of the job, so the re-run writes the same bytes. Disconnects never cancel.
 
@@ -26,13 +27,18 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use sha2::{Digest, Sha256};
-use tokio::sync::{Notify, OwnedSemaphorePermit, Semaphore, mpsc, watch};
+use tokio::sync::{Notify, OwnedSemaphorePermit, Semaphore, watch};
 
-use super::api::{self, JobList, JobView, ProgressView};
+use super::api::{self, JobList, JobView};
 use super::queue::{Full, QueueState};
+
+mod fanout;
+
 use super::runner::{Models, Progress, RunError, run_job};
 use super::spec::{JobInput, Limits, ModelCaps, Violation, validate};
 use super::store::{Artifact, JobFailure, JobRecord, JobState, Store, StoreError, StoredEvent};
+use fanout::Live;
+pub use fanout::{Snapshot, WatchItem};
 
 /// Settings of the job service.
 #[derive(Debug, Clone)]
@@ -136,43 +142,6 @@ impl ServiceError {
             ServiceError::Internal(_) => "internal",
         }
     }
-}
-
-/// What a watcher sees of a live job.
-#[derive(Debug, Clone)]
-pub struct Snapshot {
-    /// Sequence of the last persisted event.
-    pub sequence: u64,
-    /// Latest progress.
-    pub progress: Option<Progress>,
-    /// Number of previews published so far (a watcher sends a preview when this changes).
-    pub previews: u64,
-    /// The latest preview, as progress carrying it.
-    pub last_preview: Option<Progress>,
-}
-
-struct Live {
-    tx: Arc<watch::Sender<Arc<Snapshot>>>,
-    cancel: Arc<AtomicBool>,
-}
-
-/// One item of a job's event stream.
-#[derive(Debug, Clone)]
-pub enum WatchItem {
-    /// A persisted event (`state`, `artifact`, `done`).
-    Stored(StoredEvent),
-    /// Latest progress; `sequence` is the last persisted sequence (resume point).
-    Progress {
-        /// Resume point.
-        sequence: u64,
-        /// Progress JSON.
-        progress: ProgressView,
-    },
-    /// The server is shutting down; resume elsewhere from the last sequence.
-    Shutdown {
-        /// Resume point.
-        sequence: u64,
-    },
 }
 
 /// Counters for `/metrics`.
@@ -631,113 +600,6 @@ impl Service {
             .cloned()
             .ok_or_else(|| ServiceError::NotFound(format!("{id}/artifacts/{name}")))?;
         Ok((self.artifact_dir(id).join(name), a))
-    }
-
-    /// A job's events after `after`: persisted events replayed from the store, then live
-    /// progress and new events until `done` (or shutdown). Dropping the receiver stops the
-    /// feeder; the job is unaffected.
-    pub async fn watch(
-        self: &Arc<Self>,
-        tenant: &str,
-        id: &str,
-        after: u64,
-    ) -> Result<mpsc::Receiver<WatchItem>, ServiceError> {
-        let rec = self.owned(tenant, id).await?;
-        let (tx, rx) = mpsc::channel(16);
-        let svc = self.clone();
-        tokio::spawn(async move { svc.feed(rec, after, tx).await });
-        Ok(rx)
-    }
-
-    /// Send the live job's latest preview if this watcher has not seen it (previews are sticky:
-    /// coalesced progress must not lose them). False when the watcher is gone.
-    async fn send_preview(
-        tx: &mpsc::Sender<WatchItem>,
-        live: Option<&watch::Receiver<Arc<Snapshot>>>,
-        previews_sent: &mut u64,
-        sequence: u64,
-    ) -> bool {
-        let Some(rx) = live else { return true };
-        let snap = rx.borrow().clone();
-        match &snap.last_preview {
-            Some(p) if snap.previews != *previews_sent => {
-                *previews_sent = snap.previews;
-                tx.send(WatchItem::Progress {
-                    sequence,
-                    progress: api::progress_view(p),
-                })
-                .await
-                .is_ok()
-            }
-            _ => true,
-        }
-    }
-
-    async fn feed(self: Arc<Self>, rec: JobRecord, after: u64, tx: mpsc::Sender<WatchItem>) {
-        // Subscribe before reading the log, so no event falls between the two.
-        let mut live = lock(&self.live).get(&rec.id).map(|l| l.tx.subscribe());
-        let mut shutdown = self.shutdown_tx.subscribe();
-        let mut sent = after;
-        let (mut last_step, mut previews_sent) = (None, 0u64);
-        let throttle = Duration::from_millis(100);
-        loop {
-            let id = rec.id.clone();
-            let evs = match self.db(move |s| s.events_after(&id, sent)).await {
-                Ok(e) => e,
-                Err(e) => {
-                    tracing::warn!(job = %rec.id, "event replay failed: {e}");
-                    return;
-                }
-            };
-            for e in evs {
-                let done = e.kind == "done";
-                // The latest preview goes out before the stream ends, even when the job
-                // finished between two wake-ups of this feed (it is never persisted).
-                if done && !Self::send_preview(&tx, live.as_ref(), &mut previews_sent, sent).await {
-                    return;
-                }
-                sent = e.sequence;
-                if tx.send(WatchItem::Stored(e)).await.is_err() || done {
-                    return;
-                }
-            }
-            if !Self::send_preview(&tx, live.as_ref(), &mut previews_sent, sent).await {
-                return;
-            }
-            let Some(rx) = live.as_mut() else { return };
-            let snap = rx.borrow_and_update().clone();
-            if snap.sequence > sent {
-                continue;
-            }
-            if let Some(p) = &snap.progress
-                && last_step != Some((p.sample, p.step, p.phase))
-            {
-                last_step = Some((p.sample, p.step, p.phase));
-                if tx
-                    .send(WatchItem::Progress {
-                        sequence: sent,
-                        progress: api::progress_view(p),
-                    })
-                    .await
-                    .is_err()
-                {
-                    return;
-                }
-                tokio::time::sleep(throttle).await;
-            }
-            let gone = tokio::select! {
-                r = rx.changed() => r.is_err(),
-                _ = shutdown.changed() => {
-                    let _ = tx.send(WatchItem::Shutdown { sequence: sent }).await;
-                    return;
-                }
-                _ = tx.closed() => return,
-            };
-            if gone {
-                // The job left the live set (finished or deleted): replay once more, then stop.
-                live = None;
-            }
-        }
     }
 
     async fn dispatch(self: Arc<Self>) {

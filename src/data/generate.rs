@@ -66,11 +66,11 @@ pub fn synthesize(
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<SynthReport, DataError> {
     if opts.categories.is_empty() {
-        return Err(DataError::Option {
+        return Err(DataError::Option(crate::error::Invalid {
             field: "categories".into(),
             limit: "at least one category".into(),
             value: "none".into(),
-        });
+        }));
     }
     std::fs::create_dir_all(out).map_err(DataError::io(out))?;
     let done = std::sync::atomic::AtomicUsize::new(0);

@@ -52,15 +52,8 @@ pub enum DataError {
         detail: String,
     },
     /// A command-line or API option is out of range.
-    #[error("invalid {field}: {value} (must be {limit})")]
-    Option {
-        /// The option.
-        field: String,
-        /// The rule.
-        limit: String,
-        /// The value given.
-        value: String,
-    },
+    #[error("invalid {0}")]
+    Option(crate::error::Invalid),
 }
 
 impl DataError {
@@ -70,7 +63,7 @@ impl DataError {
             DataError::Core(e) => e.error_type(),
             DataError::Io { .. } => "io",
             DataError::Malformed { .. } => "malformed",
-            DataError::Option { .. } => "invalid_option",
+            DataError::Option(crate::error::Invalid { .. }) => "invalid_option",
         }
     }
 

@@ -145,27 +145,29 @@ pub fn merge_meshes(meshes: &[TriMesh]) -> TriMesh {
 pub fn scan(meshes: &[TriMesh], rng: &mut Rng, opts: &ScanOptions) -> Result<Scan, DataError> {
     let all = merge_meshes(meshes);
     let Some((lo, hi)) = all.bounds() else {
-        return Err(DataError::Option {
+        return Err(DataError::Option(crate::error::Invalid {
             field: "object".into(),
             limit: "at least one non-empty part mesh".into(),
             value: "no geometry".into(),
-        });
+        }));
     };
     if opts.points == 0 || opts.image < 16 {
-        return Err(DataError::Option {
+        return Err(DataError::Option(crate::error::Invalid {
             field: "scan".into(),
             limit: "points >= 1 and image >= 16".into(),
             value: format!("points {} image {}", opts.points, opts.image),
-        });
+        }));
     }
     let lo = Vector3::new(lo[0] as f64, lo[1] as f64, lo[2] as f64);
     let hi = Vector3::new(hi[0] as f64, hi[1] as f64, hi[2] as f64);
     let target = Point3::from((lo + hi) / 2.0);
     let radius = ((hi - lo) / 2.0).norm().max(1e-6);
-    let bvh = MeshBvh::new(&all.positions, &all.triangles).map_err(|d| DataError::Option {
-        field: "meshes".into(),
-        limit: "valid triangle indices".into(),
-        value: d,
+    let bvh = MeshBvh::new(&all.positions, &all.triangles).map_err(|d| {
+        DataError::Option(crate::error::Invalid {
+            field: "meshes".into(),
+            limit: "valid triangle indices".into(),
+            value: d,
+        })
     })?;
     let verts: Vec<Point3<f64>> = all
         .positions
@@ -260,12 +262,12 @@ pub fn scan(meshes: &[TriMesh], rng: &mut Rng, opts: &ScanOptions) -> Result<Sca
             mask_pixels: mask.len(),
         });
     }
-    Err(DataError::Option {
+    Err(DataError::Option(crate::error::Invalid {
         field: "scan".into(),
         limit: format!(
             "a well-framed camera pose within {} attempts",
             opts.max_attempts
         ),
         value: "none found (object too thin or too large for the field of view?)".into(),
-    })
+    }))
 }

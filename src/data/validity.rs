@@ -296,7 +296,7 @@ pub fn check(obj: &ArticulatedObject, opts: &ValidityOptions) -> Result<(), Viol
 fn check_structure(obj: &ArticulatedObject) -> Result<(), Violation> {
     obj.validate().map_err(|e| match e {
         CoreError::Structure(s) => Violation::NotATree(s),
-        CoreError::Invalid { ref field, .. } if field == "joints" => {
+        CoreError::Invalid(crate::error::Invalid { ref field, .. }) if field == "joints" => {
             Violation::NotATree(e.to_string())
         }
         other => Violation::Invalid(other),

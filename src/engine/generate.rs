@@ -220,21 +220,23 @@ pub fn generate_with(
     on_step: &mut dyn FnMut(&GenerateEvent) -> ControlFlow<String>,
 ) -> Result<Vec<Generated>, EngineError> {
     if req.retrieval != Retrieval::Off && shapes.codebook.is_none() {
-        return Err(EngineError::Invalid {
+        return Err(EngineError::Invalid(crate::error::Invalid {
             field: "retrieval".into(),
             limit:
                 "\"off\" for weights without a codebook (manifest.json has no \"codebook\" entry)"
                     .into(),
             value: format!("{:?}", req.retrieval.as_str()),
-        });
+        }));
     }
     // Category retrieval: a category, codes with categories, and some of that category.
     let snap_category = match (req.retrieval, shapes.codebook) {
         (Retrieval::Category, Some(codebook)) => {
-            let invalid = |limit: &str, value: String| EngineError::Invalid {
-                field: "retrieval".into(),
-                limit: limit.into(),
-                value,
+            let invalid = |limit: &str, value: String| {
+                EngineError::Invalid(crate::error::Invalid {
+                    field: "retrieval".into(),
+                    limit: limit.into(),
+                    value,
+                })
             };
             let Some(c) = req.category else {
                 return Err(invalid(
@@ -249,7 +251,7 @@ pub fn generate_with(
                 ));
             }
             if codebook.rows_of_category(c) == 0 {
-                return Err(EngineError::Invalid {
+                return Err(EngineError::Invalid(crate::error::Invalid {
                     field: "category".into(),
                     limit:
                         "a category with training codes in the codebook (retrieval \"category\")"
@@ -258,7 +260,7 @@ pub fn generate_with(
                         .category_name
                         .clone()
                         .unwrap_or_else(|| format!("index {c}")),
-                });
+                }));
             }
             Some(c)
         }
@@ -302,10 +304,12 @@ pub fn generate_with(
                 ..Default::default()
             },
         )
-        .map_err(|e| EngineError::Invalid {
-            field: "sample".into(),
-            limit: "a projectable graph".into(),
-            value: e.to_string(),
+        .map_err(|e| {
+            EngineError::Invalid(crate::error::Invalid {
+                field: "sample".into(),
+                limit: "a projectable graph".into(),
+                value: e.to_string(),
+            })
         })?;
         let codebook = shapes.codebook.filter(|_| req.retrieval != Retrieval::Off);
         // All / Category: every latent code is replaced before meshing, so each part is meshed
@@ -362,11 +366,11 @@ pub fn range_units(scales: &FeatureScales) -> [f64; 2] {
 }
 
 fn meshing_err(e: crate::error::CoreError) -> EngineError {
-    EngineError::Invalid {
+    EngineError::Invalid(crate::error::Invalid {
         field: "meshing".into(),
         limit: "valid meshing options".into(),
         value: e.to_string(),
-    }
+    })
 }
 
 /// Replace the latent shapes `mode` selects (empty meshes, or all; `Category` acts as `All`
@@ -409,11 +413,11 @@ fn snap_code(
         return Ok(false);
     };
     let Some((row, _)) = codebook.nearest_in(code, category) else {
-        return Err(EngineError::Invalid {
+        return Err(EngineError::Invalid(crate::error::Invalid {
             field: format!("part {i} shape code"),
             limit: format!("{} values (the codebook's latent size)", codebook.latent()),
             value: code.len().to_string(),
-        });
+        }));
     };
     part.shape = PartShape::Latent(codebook.row(row).to_vec());
     Ok(true)

@@ -17,15 +17,8 @@ use burn::tensor::{Device, Tensor, TensorData};
 #[derive(Debug, thiserror::Error)]
 pub enum EngineError {
     /// An option is out of range.
-    #[error("invalid {field}: {value} (must be {limit})")]
-    Invalid {
-        /// The option.
-        field: String,
-        /// The rule.
-        limit: String,
-        /// The value.
-        value: String,
-    },
+    #[error("invalid {0}")]
+    Invalid(crate::error::Invalid),
     /// The caller asked to stop (cancellation or deadline), at the given step.
     #[error("stopped at step {step} of {total}: {reason}")]
     Stopped {
@@ -53,7 +46,7 @@ impl EngineError {
     /// Machine-readable error kind.
     pub fn error_type(&self) -> &'static str {
         match self {
-            EngineError::Invalid { .. } => "invalid_option",
+            EngineError::Invalid(crate::error::Invalid { .. }) => "invalid_option",
             EngineError::Stopped { .. } => "stopped",
             EngineError::Diverged { .. } => "diverged",
         }

@@ -219,21 +219,21 @@ pub fn sample_guided(
     on_step: &mut dyn FnMut(&StepEvent) -> ControlFlow<String>,
 ) -> Result<Vec<GraphTensor>, EngineError> {
     if req.batch == 0 {
-        return Err(EngineError::Invalid {
+        return Err(EngineError::Invalid(crate::error::Invalid {
             field: "batch".into(),
             limit: "at least 1".into(),
             value: "0".into(),
-        });
+        }));
     }
     let eta = match req.sampler {
         Sampler::Ddpm => 1.0,
         Sampler::Ddim { eta } => {
             if !(eta.is_finite() && (0.0..=1.0).contains(&eta)) {
-                return Err(EngineError::Invalid {
+                return Err(EngineError::Invalid(crate::error::Invalid {
                     field: "sampler.eta".into(),
                     limit: "in [0, 1]".into(),
                     value: eta.to_string(),
-                });
+                }));
             }
             eta
         }
@@ -241,54 +241,56 @@ pub fn sample_guided(
     if !(req.category_guidance.is_finite()
         && (0.0..=MAX_CATEGORY_GUIDANCE).contains(&req.category_guidance))
     {
-        return Err(EngineError::Invalid {
+        return Err(EngineError::Invalid(crate::error::Invalid {
             field: "category_guidance".into(),
             limit: format!("in [0, {MAX_CATEGORY_GUIDANCE}]"),
             value: req.category_guidance.to_string(),
-        });
+        }));
     }
     if let Some(below) = req.category_guidance_below
         && !(1..=schedule.len()).contains(&below)
     {
-        return Err(EngineError::Invalid {
+        return Err(EngineError::Invalid(crate::error::Invalid {
             field: "category_guidance_below".into(),
             limit: format!("in [1, {}]", schedule.len()),
             value: below.to_string(),
-        });
+        }));
     }
     if req.steps > schedule.len() {
-        return Err(EngineError::Invalid {
+        return Err(EngineError::Invalid(crate::error::Invalid {
             field: "steps".into(),
             limit: format!("at most {} (0: all)", schedule.len()),
             value: req.steps.to_string(),
-        });
+        }));
     }
     let guidance = match (&req.guidance, guide) {
         (Some(g), Some(ctx)) if g.is_active() => {
             g.validate(schedule.len())?;
             if ctx.field.latent() + crate::graph::node_ch::LATENT > NODE_DIM {
-                return Err(EngineError::Invalid {
+                return Err(EngineError::Invalid(crate::error::Invalid {
                     field: "guidance.decoder".into(),
                     limit: format!(
                         "latent width ≤ {}",
                         NODE_DIM - crate::graph::node_ch::LATENT
                     ),
                     value: ctx.field.latent().to_string(),
-                });
+                }));
             }
-            ctx.scales.validate().map_err(|e| EngineError::Invalid {
-                field: "guidance.scales".into(),
-                limit: "valid feature scales".into(),
-                value: e.to_string(),
+            ctx.scales.validate().map_err(|e| {
+                EngineError::Invalid(crate::error::Invalid {
+                    field: "guidance.scales".into(),
+                    limit: "valid feature scales".into(),
+                    value: e.to_string(),
+                })
             })?;
             Some((g, ctx))
         }
         (Some(g), None) if g.is_active() => {
-            return Err(EngineError::Invalid {
+            return Err(EngineError::Invalid(crate::error::Invalid {
                 field: "guidance".into(),
                 limit: "a shape decoder (call sample_guided / generate_with)".into(),
                 value: "none given".into(),
-            });
+            }));
         }
         _ => None,
     };

@@ -36,24 +36,17 @@ use crate::object::{ArticulatedObject, JointState};
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum EvalError {
     /// An option or input broke a limit.
-    #[error("invalid {field}: {value} (must be {limit})")]
-    Invalid {
-        /// Which option or input.
-        field: String,
-        /// What is allowed.
-        limit: String,
-        /// What was given.
-        value: String,
-    },
+    #[error("invalid {0}")]
+    Invalid(crate::error::Invalid),
 }
 
 impl EvalError {
     fn invalid(field: &str, limit: &str, value: impl ToString) -> Self {
-        EvalError::Invalid {
+        EvalError::Invalid(crate::error::Invalid {
             field: field.into(),
             limit: limit.into(),
             value: value.to_string(),
-        }
+        })
     }
 }
 

@@ -504,22 +504,22 @@ pub fn table_rows(opts: &TableOptions) -> Result<Vec<RowSpec>, EngineError> {
         .iter()
         .find(|n| !VARIANTS.iter().any(|v| &v.name == n))
     {
-        return Err(EngineError::Invalid {
+        return Err(EngineError::Invalid(crate::error::Invalid {
             field: "variants".into(),
             limit: format!("names among {}", VARIANTS.map(|v| v.name).join(", ")),
             value: unknown.clone(),
-        });
+        }));
     }
     if let Some((name, v)) = ["pc", "pen", "mob"]
         .into_iter()
         .zip(opts.loss_scales)
         .find(|(_, v)| !(v.is_finite() && (0.0..=100.0).contains(v)))
     {
-        return Err(EngineError::Invalid {
+        return Err(EngineError::Invalid(crate::error::Invalid {
             field: format!("loss_scales.{name}"),
             limit: "finite, in [0, 100]".into(),
             value: v.to_string(),
-        });
+        }));
     }
     let specs: Vec<RowSpec> = opts
         .category_aware
@@ -604,11 +604,11 @@ impl SweepKind {
             "pen" => Ok(SweepKind::Pen),
             "mob" => Ok(SweepKind::Mob),
             "tau" => Ok(SweepKind::Tau),
-            other => Err(EngineError::Invalid {
+            other => Err(EngineError::Invalid(crate::error::Invalid {
                 field: "sweep".into(),
                 limit: "one of pc, pen, mob, tau".into(),
                 value: other.into(),
-            }),
+            })),
         }
     }
 
@@ -636,11 +636,11 @@ pub fn sweep_rows(
     default_tau: f64,
 ) -> Result<Vec<RowSpec>, EngineError> {
     let bad = |field: &str, limit: &str, value: String| {
-        Err(EngineError::Invalid {
+        Err(EngineError::Invalid(crate::error::Invalid {
             field: field.into(),
             limit: limit.into(),
             value,
-        })
+        }))
     };
     if kind == SweepKind::Tau {
         if taus.is_empty() {
@@ -730,11 +730,11 @@ pub fn run_rows(
     on_sample: &mut dyn FnMut(usize, usize),
 ) -> Result<Vec<TableRow>, EngineError> {
     if opts.samples_per_cloud == 0 {
-        return Err(EngineError::Invalid {
+        return Err(EngineError::Invalid(crate::error::Invalid {
             field: "samples_per_cloud".into(),
             limit: "at least 1".into(),
             value: "0".into(),
-        });
+        }));
     }
     let specs: Vec<&RowSpec> = specs
         .iter()
@@ -905,10 +905,12 @@ pub fn cloud_metrics(
     let d_rr = distance_matrix(references, references, true, &quiet);
     distribution_metrics(&d_gr, &d_gg, &d_rr, MetricOrder::PointFlow)
         .map(Some)
-        .map_err(|e| EngineError::Invalid {
-            field: "references".into(),
-            limit: "valid instantiation distances".into(),
-            value: e.to_string(),
+        .map_err(|e| {
+            EngineError::Invalid(crate::error::Invalid {
+                field: "references".into(),
+                limit: "valid instantiation distances".into(),
+                value: e.to_string(),
+            })
         })
 }
 

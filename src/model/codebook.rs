@@ -59,10 +59,12 @@ impl Codebook {
     /// Wrap `codes` (`rows × latent`, row-major); refuses an empty or ragged table and
     /// non-finite values.
     pub fn new(latent: usize, codes: Vec<f32>) -> Result<Self, ModelError> {
-        let config = |field: &str, limit: &str, value: String| ModelError::Config {
-            field: field.into(),
-            limit: limit.into(),
-            value,
+        let config = |field: &str, limit: &str, value: String| {
+            ModelError::Config(crate::error::Invalid {
+                field: field.into(),
+                limit: limit.into(),
+                value,
+            })
         };
         if latent == 0 {
             return Err(config("codebook latent", "at least 1", "0".into()));
@@ -96,21 +98,21 @@ impl Codebook {
         category_count: usize,
     ) -> Result<Self, ModelError> {
         if categories.len() != self.rows() {
-            return Err(ModelError::Config {
+            return Err(ModelError::Config(crate::error::Invalid {
                 field: "codebook categories".into(),
                 limit: format!("one per code ({} codes)", self.rows()),
                 value: format!("{} categories", categories.len()),
-            });
+            }));
         }
         if let Some(i) = categories
             .iter()
             .position(|&c| c as usize >= category_count)
         {
-            return Err(ModelError::Config {
+            return Err(ModelError::Config(crate::error::Invalid {
                 field: "codebook categories".into(),
                 limit: format!("indices below the category count {category_count}"),
                 value: format!("{} at row {i}", categories[i]),
-            });
+            }));
         }
         self.categories = Some(categories);
         Ok(self)
@@ -138,10 +140,12 @@ impl Codebook {
         on_row: &mut dyn FnMut(usize, usize),
     ) -> Result<(Self, Vec<usize>), ModelError> {
         Codebook::new(latent, codes.to_vec())?;
-        check.validate().map_err(|e| ModelError::Config {
-            field: "codebook check resolution".into(),
-            limit: "a valid meshing resolution".into(),
-            value: e.to_string(),
+        check.validate().map_err(|e| {
+            ModelError::Config(crate::error::Invalid {
+                field: "codebook check resolution".into(),
+                limit: "a valid meshing resolution".into(),
+                value: e.to_string(),
+            })
         })?;
         let total = codes.len() / latent;
         let mut kept = Vec::new();
@@ -158,11 +162,11 @@ impl Codebook {
             on_row(i + 1, total);
         }
         if kept.is_empty() {
-            return Err(ModelError::Config {
+            return Err(ModelError::Config(crate::error::Invalid {
                 field: "codebook".into(),
                 limit: "at least one code that decodes to a non-empty shape".into(),
                 value: format!("0 of {total} codes"),
-            });
+            }));
         }
         Ok((Codebook::new(latent, table)?, kept))
     }

@@ -141,11 +141,11 @@ impl DenoiserConfig {
     /// Check every field; the error names the field, the rule and the value.
     pub fn validate(&self) -> Result<(), ModelError> {
         let err = |field: &str, limit: &str, value: String| {
-            Err(ModelError::Config {
+            Err(ModelError::Config(crate::error::Invalid {
                 field: format!("denoiser.{field}"),
                 limit: limit.into(),
                 value,
-            })
+            }))
         };
         if self.width == 0 || self.width > 8192 {
             return err("width", "in 1..=8192", self.width.to_string());
@@ -607,22 +607,22 @@ impl Denoiser {
                 .enumerate()
                 .find(|(_, v)| **v < 0 || **v as usize > hi)
             {
-                return Err(ModelError::Config {
+                return Err(ModelError::Config(crate::error::Invalid {
                     field: format!("{field}[{k}]"),
                     limit: format!("in 0..={hi}"),
                     value: bad.to_string(),
-                });
+                }));
             }
             Ok(())
         };
         range("t", t, TIME_STEPS - 1)?;
         if let Some(c) = category {
             if self.config.categories == 0 {
-                return Err(ModelError::Config {
+                return Err(ModelError::Config(crate::error::Invalid {
                     field: "category".into(),
                     limit: "absent for an unconditional model (categories = 0)".into(),
                     value: "given".into(),
-                });
+                }));
             }
             if c.dims() != [b] {
                 return shape("category", format!("[{b}]"), format!("{:?}", c.dims()));

@@ -42,10 +42,12 @@ pub enum Compute {
 impl Compute {
     /// Parse `cpu`, `gpu` (the best Vulkan device) or `gpu:N` (discrete GPU N). `field` names the option in the error.
     pub fn parse(field: &str, s: &str) -> Result<Self, ModelError> {
-        let bad = |limit: &str| ModelError::Config {
-            field: field.to_string(),
-            limit: limit.to_string(),
-            value: s.to_string(),
+        let bad = |limit: &str| {
+            ModelError::Config(crate::error::Invalid {
+                field: field.to_string(),
+                limit: limit.to_string(),
+                value: s.to_string(),
+            })
         };
         let compute = match s {
             "cpu" => return Ok(Compute::Cpu),
@@ -102,15 +104,8 @@ fn gpu_device(_index: Option<usize>) -> Device {
 #[derive(Debug, thiserror::Error)]
 pub enum ModelError {
     /// A configuration value is out of range.
-    #[error("invalid model config {field}: {value} (must be {limit})")]
-    Config {
-        /// The field.
-        field: String,
-        /// The rule.
-        limit: String,
-        /// The value.
-        value: String,
-    },
+    #[error("invalid model config {0}")]
+    Config(crate::error::Invalid),
     /// A tensor had the wrong shape.
     #[error("shape mismatch for {what}: expected {expected}, got {got}")]
     Shape {

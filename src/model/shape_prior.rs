@@ -110,11 +110,11 @@ impl ShapePriorConfig {
     /// differs or would shrink, its limit and value.
     pub fn check_decoder_growth(&self, from: &ShapePriorConfig) -> Result<(), ModelError> {
         let refuse = |field: &str, limit: String, value: String| {
-            Err(ModelError::Config {
+            Err(ModelError::Config(crate::error::Invalid {
                 field: field.into(),
                 limit,
                 value,
-            })
+            }))
         };
         for (field, want, have) in [
             ("pe_freqs", self.pe_freqs, from.pe_freqs),
@@ -147,11 +147,11 @@ impl ShapePriorConfig {
             if (lo..=hi).contains(&value) {
                 Ok(())
             } else {
-                Err(ModelError::Config {
+                Err(ModelError::Config(crate::error::Invalid {
                     field: field.into(),
                     limit: format!("between {lo} and {hi}"),
                     value: value.to_string(),
-                })
+                }))
             }
         };
         check("latent", self.latent, 1, MAX_WIDTH)?;
@@ -333,11 +333,11 @@ impl ShapeDecoder {
         };
         cfg.check_decoder_growth(&from)?;
         if cfg.code_rows() != rows {
-            return Err(ModelError::Config {
+            return Err(ModelError::Config(crate::error::Invalid {
                 field: "code_every_block".into(),
                 limit: format!("{rows} code rows"),
                 value: cfg.code_rows().to_string(),
-            });
+            }));
         }
         let device = self.fc_p.weight.device();
         let hh = cfg.decoder_hidden;

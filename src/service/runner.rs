@@ -361,11 +361,13 @@ pub fn run_job(
                 done_samples.push(g);
             }
             Ok(_) => {
-                return Err(RunError::Engine(EngineError::Invalid {
-                    field: "samples".into(),
-                    limit: "at least 1".into(),
-                    value: "0".into(),
-                }));
+                return Err(RunError::Engine(EngineError::Invalid(
+                    crate::error::Invalid {
+                        field: "samples".into(),
+                        limit: "at least 1".into(),
+                        value: "0".into(),
+                    },
+                )));
             }
             Err(EngineError::Stopped { reason, .. }) => return Err(RunError::Stopped(reason)),
             Err(e @ EngineError::Diverged { .. }) => {

@@ -653,7 +653,7 @@ fn check_resumed_scales(record: &Path, scales: &FeatureScales) -> Result<(), Tra
             .map(|v| v.as_f64().unwrap_or(f64::NAN) as f32)
             .collect();
         if let Some(k) = (0..now.len()).find(|&k| was.get(k) != Some(&now[k])) {
-            return Err(TrainError::Config {
+            return Err(TrainError::Config(crate::error::Invalid {
                 field: format!("feature_scales.{name}[{k}]"),
                 limit: format!(
                     "the resumed run's {} (recorded in {}, layout_gain {}, code_gain {}): resume \
@@ -664,7 +664,7 @@ fn check_resumed_scales(record: &Path, scales: &FeatureScales) -> Result<(), Tra
                     doc["code_gain"].as_f64().unwrap_or(DEFAULT_CODE_GAIN)
                 ),
                 value: now[k].to_string(),
-            });
+            }));
         }
     }
     Ok(())
@@ -768,11 +768,11 @@ pub fn train_diffusion(
         ),
     ] {
         if !ok {
-            return Err(TrainError::Config {
+            return Err(TrainError::Config(crate::error::Invalid {
                 field: field.into(),
                 limit: limit.into(),
                 value,
-            });
+            }));
         }
     }
     let scales = data

@@ -68,28 +68,28 @@ pub fn held_out_loss(
 ) -> Result<HeldOutLoss, TrainError> {
     let schedule = Schedule::default();
     if levels.is_empty() {
-        return Err(TrainError::Config {
+        return Err(TrainError::Config(crate::error::Invalid {
             field: "levels".into(),
             limit: "at least one noise level".into(),
             value: "none".into(),
-        });
+        }));
     }
     if let Some(&t) = levels.iter().find(|&&t| t >= schedule.len()) {
-        return Err(TrainError::Config {
+        return Err(TrainError::Config(crate::error::Invalid {
             field: "levels".into(),
             limit: format!("each in 0..{}", schedule.len()),
             value: t.to_string(),
-        });
+        }));
     }
     let categories = model.config().categories;
     if let Some(&c) = data.categories.iter().find(|&&c| c >= categories)
         && categories > 0
     {
-        return Err(TrainError::Config {
+        return Err(TrainError::Config(crate::error::Invalid {
             field: "category_index".into(),
             limit: format!("below the denoiser's {categories} categories"),
             value: c.to_string(),
-        });
+        }));
     }
     let device = crate::model::cpu();
     let n = data.graphs.len();

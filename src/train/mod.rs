@@ -35,15 +35,8 @@ pub enum TrainError {
         detail: String,
     },
     /// A configuration value is out of range.
-    #[error("invalid training config {field}: {value} (must be {limit})")]
-    Config {
-        /// The field.
-        field: String,
-        /// The rule.
-        limit: String,
-        /// The value given.
-        value: String,
-    },
+    #[error("invalid training config {0}")]
+    Config(crate::error::Invalid),
     /// The loss became non-finite or exploded.
     #[error("training diverged at step {step}: loss {loss}")]
     Diverged {
@@ -69,7 +62,7 @@ impl TrainError {
         match self {
             TrainError::Io { .. } => "io",
             TrainError::Data { .. } => "malformed",
-            TrainError::Config { .. } => "invalid_option",
+            TrainError::Config(crate::error::Invalid { .. }) => "invalid_option",
             TrainError::Diverged { .. } => "diverged",
             TrainError::Model(_) => "invalid_option",
             TrainError::Core(e) => e.error_type(),
@@ -97,11 +90,11 @@ impl TrainError {
         limit: impl Into<String>,
         value: impl ToString,
     ) -> TrainError {
-        TrainError::Config {
+        TrainError::Config(crate::error::Invalid {
             field: field.into(),
             limit: limit.into(),
             value: value.to_string(),
-        }
+        })
     }
 }
 

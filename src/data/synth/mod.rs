@@ -40,10 +40,12 @@ use crate::error::CoreError;
 pub fn generate(category: &str, rng: &mut Rng) -> Result<LabelledObject, DataError> {
     let canonical = canonical_name(category)
         .filter(|c| SYNTH_CATEGORIES.contains(c))
-        .ok_or_else(|| DataError::Option {
-            field: "category".into(),
-            limit: format!("one of {}", SYNTH_CATEGORIES.join(", ")),
-            value: format!("{category:?}"),
+        .ok_or_else(|| {
+            DataError::Option(crate::error::Invalid {
+                field: "category".into(),
+                limit: format!("one of {}", SYNTH_CATEGORIES.join(", ")),
+                value: format!("{category:?}"),
+            })
         })?;
     match canonical {
         "StorageFurniture" => furniture::storage_furniture(rng),
@@ -72,11 +74,11 @@ pub fn generate_valid(
     max_attempts: usize,
 ) -> Result<(LabelledObject, usize), DataError> {
     if max_attempts == 0 {
-        return Err(DataError::Option {
+        return Err(DataError::Option(crate::error::Invalid {
             field: "max_attempts".into(),
             limit: ">= 1".into(),
             value: "0".into(),
-        });
+        }));
     }
     let opts = ValidityOptions::default();
     let mut last = None;

@@ -69,15 +69,8 @@ pub enum UrdfError {
         source: std::io::Error,
     },
     /// A command-line or API option is wrong.
-    #[error("invalid {field}: {value} (must be {limit})")]
-    Option {
-        /// The option.
-        field: String,
-        /// The rule.
-        limit: String,
-        /// The value given.
-        value: String,
-    },
+    #[error("invalid {0}")]
+    Option(crate::error::Invalid),
     /// The dataset writer failed.
     #[error(transparent)]
     Data(#[from] DataError),
@@ -95,11 +88,11 @@ impl UrdfError {
     }
 
     fn option(field: &str, limit: &str, value: impl std::fmt::Display) -> Self {
-        UrdfError::Option {
+        UrdfError::Option(crate::error::Invalid {
             field: field.into(),
             limit: limit.into(),
             value: value.to_string(),
-        }
+        })
     }
 
     /// Machine-readable error kind.
@@ -107,7 +100,7 @@ impl UrdfError {
         match self {
             UrdfError::Xml { .. } => "malformed",
             UrdfError::Io { .. } => "io",
-            UrdfError::Option { .. } => "invalid_option",
+            UrdfError::Option(crate::error::Invalid { .. }) => "invalid_option",
             UrdfError::Data(e) => e.error_type(),
         }
     }

@@ -204,11 +204,11 @@ impl GuidanceOptions {
     /// Check every field against its limit; `total_steps` is the sampler's T.
     pub fn validate(&self, total_steps: usize) -> Result<(), EngineError> {
         let bad = |field: &str, limit: String, value: String| {
-            Err(EngineError::Invalid {
+            Err(EngineError::Invalid(crate::error::Invalid {
                 field: format!("guidance.{field}"),
                 limit,
                 value,
-            })
+            }))
         };
         for (name, w) in [
             ("w_pc", self.w_pc),

@@ -37,15 +37,8 @@ pub use metrics::{JointMatch, ObjectMetrics, object_metrics};
 #[derive(Debug, thiserror::Error)]
 pub enum RealError {
     /// An option or input broke a limit.
-    #[error("invalid {field}: {value} (must be {limit})")]
-    Invalid {
-        /// Which option or input.
-        field: String,
-        /// What is allowed.
-        limit: String,
-        /// What was given.
-        value: String,
-    },
+    #[error("invalid {0}")]
+    Invalid(crate::error::Invalid),
     /// Generation failed for a reason that is not the job's (bad settings).
     #[error(transparent)]
     Engine(#[from] EngineError),
@@ -180,9 +173,13 @@ pub fn draw_samples(
                 (Ok(g), d)
             }
             Ok(_) => (Err("no sample returned".to_string()), f64::NAN),
-            Err(e @ (EngineError::Invalid { .. } | EngineError::Stopped { .. })) => {
+            Err(
+                e @ (EngineError::Invalid(crate::error::Invalid { .. })
+                | EngineError::Stopped { .. }),
+            ) => {
                 // A projection failure is the sample's; other invalid options are the run's.
-                if matches!(&e, EngineError::Invalid { field, .. } if field == "sample") {
+                if matches!(&e, EngineError::Invalid(crate::error::Invalid { field, .. }) if field == "sample")
+                {
                     (Err(e.to_string()), f64::NAN)
                 } else {
                     return Err(e.into());

@@ -380,14 +380,14 @@ pub(crate) fn read_checkpoint(
             x => x.clone(),
         };
         if theirs != ours[field] {
-            return Err(TrainError::Config {
+            return Err(TrainError::Config(crate::error::Invalid {
                 field: field.to_string(),
                 limit: format!(
                     "the checkpoint's value {theirs} to resume {} (or start afresh without --resume)",
                     path.display()
                 ),
                 value: ours[field].to_string(),
-            });
+            }));
         }
     }
     check_checkpoint_weights(&out.join(WEIGHTS_FILE), &v["weights_sha256"], &path)?;

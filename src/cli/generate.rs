@@ -159,6 +159,28 @@ pub(crate) struct SamplingArgs {
     pub(crate) category: CategoryGuidanceArgs,
 }
 
+impl SamplingArgs {
+    /// The guidance these flags give for `points` and the resolved `[w_pc, w_pen, w_mob]`
+    /// (not yet validated against a schedule).
+    pub(crate) fn guidance(
+        &self,
+        points: Vec<[f32; 3]>,
+        [w_pc, w_pen, w_mob]: [f64; 3],
+    ) -> GuidanceOptions {
+        GuidanceOptions {
+            points,
+            w_pc,
+            w_pen,
+            w_mob,
+            steps: self.guidance_steps,
+            tau: self.tau,
+            max_step: max_step(self.guidance_max_step),
+            refine_steps: self.guidance_refine_steps,
+            refine_physics_steps: self.guidance_refine_physics_steps,
+        }
+    }
+}
+
 /// `--guidance-max-step` to the engine's option: 0 turns the clamp off (the paper's raw step);
 /// other values, negative ones included, go to the engine, which validates them.
 pub(crate) fn max_step(flag: f64) -> Option<f64> {
@@ -368,19 +390,9 @@ pub(crate) fn guidance_options(a: &GenerateArgs) -> anyhow::Result<Option<Guidan
     if points.is_empty() && a.w_pen.is_none() && a.w_mob.is_none() {
         return Ok(None);
     }
-    let [w_pc, w_pen, w_mob] =
+    let weights =
         GuidanceOptions::weights_or_defaults([a.w_pc, a.w_pen, a.w_mob], !points.is_empty());
-    let opts = GuidanceOptions {
-        points,
-        w_pc,
-        w_pen,
-        w_mob,
-        steps: a.sampling.guidance_steps,
-        tau: a.sampling.tau,
-        max_step: max_step(a.sampling.guidance_max_step),
-        refine_steps: a.sampling.guidance_refine_steps,
-        refine_physics_steps: a.sampling.guidance_refine_physics_steps,
-    };
+    let opts = a.sampling.guidance(points, weights);
     opts.validate(Schedule::default().len())?;
     Ok(Some(opts))
 }

@@ -38,7 +38,7 @@ use physnap::mesh::MeshingOptions;
 use physnap::model::shape_prior::LatentSdfDecoder;
 use physnap::pointcloud::{Limits, PointCloud};
 
-use crate::cli::generate::{SamplingArgs, joint_motion, max_step, retrieval_mode, sampler};
+use crate::cli::generate::{SamplingArgs, joint_motion, retrieval_mode, sampler};
 use crate::cli::progress_bar;
 
 /// The MuJoCo check, shipped inside the binary so an installed `physnap` has it.
@@ -335,17 +335,7 @@ pub fn eval_real(a: EvalRealArgs) -> anyhow::Result<()> {
                 Vec::new()
             };
             let guided = if n_guided > 0 {
-                let opts = GuidanceOptions {
-                    points: points.clone(),
-                    w_pc,
-                    w_pen,
-                    w_mob,
-                    steps: a.sampling.guidance_steps,
-                    tau: a.sampling.tau,
-                    max_step: max_step(a.sampling.guidance_max_step),
-                    refine_steps: a.sampling.guidance_refine_steps,
-                    refine_physics_steps: a.sampling.guidance_refine_physics_steps,
-                };
+                let opts = a.sampling.guidance(points.clone(), [w_pc, w_pen, w_mob]);
                 opts.validate(schedule.len())?;
                 let req = GenerateRequest {
                     guidance: Some(opts),

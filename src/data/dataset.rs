@@ -291,7 +291,7 @@ pub fn write_object_samples(
         let bvh = MeshBvh::new(&normalised.positions, &normalised.triangles).map_err(|d| {
             DataError::Malformed {
                 path: path.clone(),
-                detail: d,
+                detail: d.to_string(),
             }
         })?;
         let prims: &[crate::shape::Primitive] = match &part.shape {
@@ -403,7 +403,7 @@ pub fn load_object_meshes(
         let text = std::fs::read_to_string(&path).map_err(DataError::io(&path))?;
         let m = obj::parse(&text).map_err(|d| DataError::Malformed {
             path: path.clone(),
-            detail: d,
+            detail: d.to_string(),
         })?;
         let (kappa, t) = (part.kappa() as f32, part.center.map(|v| v as f32));
         meshes.push(

@@ -461,7 +461,7 @@ pub fn read_object(dir: &Path) -> Result<ImportedObject, DataError> {
                     continue;
                 }
             };
-            let m = obj::parse(&text).map_err(|d| malformed(&path, d))?;
+            let m = obj::parse(&text).map_err(|d| malformed(&path, d.to_string()))?;
             let base = mesh.positions.len() as u32;
             mesh.positions.extend(m.positions.iter().map(|v| {
                 let w = raw_to_world([v[0] as f64, v[1] as f64, v[2] as f64]);

@@ -166,7 +166,7 @@ pub fn scan(meshes: &[TriMesh], rng: &mut Rng, opts: &ScanOptions) -> Result<Sca
         DataError::Option(crate::error::Invalid {
             field: "meshes".into(),
             limit: "valid triangle indices".into(),
-            value: d,
+            value: d.to_string(),
         })
     })?;
     let verts: Vec<Point3<f64>> = all

@@ -66,9 +66,10 @@ pub(crate) fn gt_occupancy(
     }
     let mesh_path = dir.join(format!("part{}.obj", p.k));
     let text = std::fs::read_to_string(&mesh_path).map_err(TrainError::io(&mesh_path))?;
-    let mesh = crate::mesh::obj::parse(&text).map_err(|e| TrainError::data(&mesh_path, e))?;
+    let mesh =
+        crate::mesh::obj::parse(&text).map_err(|e| TrainError::data(&mesh_path, e.to_string()))?;
     let bvh = MeshBvh::new(&mesh.positions, &mesh.triangles)
-        .map_err(|e| TrainError::data(&mesh_path, e))?;
+        .map_err(|e| TrainError::data(&mesh_path, e.to_string()))?;
     Ok(grid.par_iter().map(|q| bvh.is_inside(*q)).collect())
 }
 

@@ -29,6 +29,7 @@
 //! the corner bit set for inside corners, Bourke's table lists triangles the other way round, so
 //! each table triangle `(a, b, c)` is emitted as `(a, c, b)`.
 
+use crate::mesh::MeshError;
 use std::collections::HashMap;
 
 /// A dense grid of SDF samples at the points origin + spacing * (i, j, k).
@@ -49,25 +50,25 @@ impl ScalarGrid<'_> {
     /// Checks the grid description: every `dims` entry >= 2, every `spacing` entry finite and
     /// positive, every `origin` entry finite, and `values.len()` equal to the product of `dims`.
     /// The error message names the offending field, the limit and the value found.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), MeshError> {
         for (axis, name) in AXIS_NAMES.iter().enumerate() {
             let n = self.dims[axis];
             if n < 2 {
-                return Err(format!(
+                return Err(MeshError::Grid(format!(
                     "ScalarGrid.dims[{axis}] ({name}) must be >= 2, got {n}"
-                ));
+                )));
             }
             let h = self.spacing[axis];
             if !(h.is_finite() && h > 0.0) {
-                return Err(format!(
+                return Err(MeshError::Grid(format!(
                     "ScalarGrid.spacing[{axis}] ({name}) must be finite and > 0, got {h}"
-                ));
+                )));
             }
             let o = self.origin[axis];
             if !o.is_finite() {
-                return Err(format!(
+                return Err(MeshError::Grid(format!(
                     "ScalarGrid.origin[{axis}] ({name}) must be finite, got {o}"
-                ));
+                )));
             }
         }
         let [nx, ny, nz] = self.dims;
@@ -75,14 +76,16 @@ impl ScalarGrid<'_> {
             .checked_mul(ny)
             .and_then(|p| p.checked_mul(nz))
             .ok_or_else(|| {
-                format!("ScalarGrid.dims product overflows usize: dims = [{nx}, {ny}, {nz}]")
+                MeshError::Grid(format!(
+                    "ScalarGrid.dims product overflows usize: dims = [{nx}, {ny}, {nz}]"
+                ))
             })?;
         if self.values.len() != expected {
-            return Err(format!(
+            return Err(MeshError::Grid(format!(
                 "ScalarGrid.values.len() must equal dims[0] * dims[1] * dims[2] = \
                  {nx} * {ny} * {nz} = {expected}, got {}",
                 self.values.len()
-            ));
+            )));
         }
         Ok(())
     }
@@ -105,10 +108,12 @@ pub struct McMesh {
 /// A sample is inside when it is finite and `< level`. Every returned vertex is used by at least
 /// one triangle. Errors: an invalid grid (see [`ScalarGrid::validate`]), a non-finite `level`, or
 /// more vertices than a `u32` index can address.
-pub fn marching_cubes(grid: &ScalarGrid<'_>, level: f32) -> Result<McMesh, String> {
+pub fn marching_cubes(grid: &ScalarGrid<'_>, level: f32) -> Result<McMesh, MeshError> {
     grid.validate()?;
     if !level.is_finite() {
-        return Err(format!("marching_cubes: level must be finite, got {level}"));
+        return Err(MeshError::Grid(format!(
+            "marching_cubes: level must be finite, got {level}"
+        )));
     }
     let mut ex = Extractor::new(grid, level);
     ex.run()?;
@@ -219,7 +224,7 @@ impl<'g, 'a> Extractor<'g, 'a> {
         v < self.level && v > f32::NEG_INFINITY
     }
 
-    fn run(&mut self) -> Result<(), String> {
+    fn run(&mut self) -> Result<(), MeshError> {
         let [nx, ny, nz] = self.grid.dims;
         let plane = nx * ny;
         let values = self.grid.values;
@@ -271,7 +276,7 @@ impl<'g, 'a> Extractor<'g, 'a> {
         cell: [usize; 3],
         case: usize,
         cache: &mut SlabCache,
-    ) -> Result<(), String> {
+    ) -> Result<(), MeshError> {
         let nx = self.grid.dims[0];
         let edges = EDGE_TABLE[case];
         let mut vid = [NONE; 12];
@@ -305,7 +310,7 @@ impl<'g, 'a> Extractor<'g, 'a> {
 
     /// Creates the vertex where the surface crosses the grid edge from sample `lower` one step
     /// along `axis`. Depends only on the edge, so it is the same whichever cell asks for it.
-    fn edge_vertex(&mut self, lower: [usize; 3], axis: usize) -> Result<u32, String> {
+    fn edge_vertex(&mut self, lower: [usize; 3], axis: usize) -> Result<u32, MeshError> {
         let [nx, ny, _] = self.grid.dims;
         let stride = [1, nx, nx * ny][axis];
         let c0 = lower[0] + nx * (lower[1] + ny * lower[2]);
@@ -354,15 +359,15 @@ impl<'g, 'a> Extractor<'g, 'a> {
         }
     }
 
-    fn push_vertex(&mut self, p: [f32; 3]) -> Result<u32, String> {
+    fn push_vertex(&mut self, p: [f32; 3]) -> Result<u32, MeshError> {
         let id = u32::try_from(self.positions.len())
             .ok()
             .filter(|&id| id != NONE)
             .ok_or_else(|| {
-                format!(
+                MeshError::Grid(format!(
                     "marching_cubes: more than {} vertices do not fit u32 indices",
                     NONE - 1
-                )
+                ))
             })?;
         self.positions.push(p);
         Ok(id)

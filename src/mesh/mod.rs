@@ -25,6 +25,22 @@ use crate::error::{CoreError, CoreResult};
 use crate::object::{ArticulatedObject, Part};
 use crate::shape::{AnalyticSdf, LatentDecoder, PartShape, Sdf};
 
+/// An error of the mesh layer's readers and builders; the message names what was wrong (the
+/// OBJ line, the grid field and its value, the triangle and its index).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum MeshError {
+    /// A sampling grid or iso-level marching cubes cannot use, or more vertices than `u32`
+    /// indices address.
+    #[error("{0}")]
+    Grid(String),
+    /// OBJ text that is not a triangle mesh.
+    #[error("{0}")]
+    Obj(String),
+    /// Positions and triangles a BVH cannot be built on.
+    #[error("{0}")]
+    Triangles(String),
+}
+
 /// Half-width of the meshing domain in the normalised part frame.
 pub const DOMAIN_HALF: f32 = 0.55;
 /// Default grid resolution (cells per axis over the domain).

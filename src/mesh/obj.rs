@@ -6,9 +6,10 @@
 //! ignored. Malformed lines are errors naming the line; out-of-range indices too.
 
 use super::TriMesh;
+use crate::mesh::MeshError;
 
 /// Parse OBJ text into a triangle mesh.
-pub fn parse(text: &str) -> Result<TriMesh, String> {
+pub fn parse(text: &str) -> Result<TriMesh, MeshError> {
     let mut mesh = TriMesh::default();
     for (ln, line) in text.lines().enumerate() {
         let line = line.trim();
@@ -18,13 +19,22 @@ pub fn parse(text: &str) -> Result<TriMesh, String> {
                 let mut p = [0f32; 3];
                 for (a, v) in p.iter_mut().enumerate() {
                     let tok = it.next().ok_or_else(|| {
-                        format!("line {}: vertex has fewer than 3 coordinates", ln + 1)
+                        MeshError::Obj(format!(
+                            "line {}: vertex has fewer than 3 coordinates",
+                            ln + 1
+                        ))
                     })?;
                     *v = tok.parse::<f32>().map_err(|_| {
-                        format!("line {}: coordinate {a} '{tok}' is not a number", ln + 1)
+                        MeshError::Obj(format!(
+                            "line {}: coordinate {a} '{tok}' is not a number",
+                            ln + 1
+                        ))
                     })?;
                     if !v.is_finite() {
-                        return Err(format!("line {}: coordinate {a} is not finite", ln + 1));
+                        return Err(MeshError::Obj(format!(
+                            "line {}: coordinate {a} is not finite",
+                            ln + 1
+                        )));
                     }
                 }
                 mesh.positions.push(p);
@@ -35,20 +45,26 @@ pub fn parse(text: &str) -> Result<TriMesh, String> {
                     .map(|tok| {
                         let first = tok.split('/').next().unwrap_or("");
                         let i: i64 = first.parse().map_err(|_| {
-                            format!("line {}: face index '{tok}' is not an integer", ln + 1)
+                            MeshError::Obj(format!(
+                                "line {}: face index '{tok}' is not an integer",
+                                ln + 1
+                            ))
                         })?;
                         let k = if i < 0 { n + i } else { i - 1 };
                         if k < 0 || k >= n {
-                            return Err(format!(
+                            return Err(MeshError::Obj(format!(
                                 "line {}: face index {i} out of range (1..={n})",
                                 ln + 1
-                            ));
+                            )));
                         }
                         Ok(k as u32)
                     })
-                    .collect::<Result<_, String>>()?;
+                    .collect::<Result<_, MeshError>>()?;
                 if idx.len() < 3 {
-                    return Err(format!("line {}: face has fewer than 3 vertices", ln + 1));
+                    return Err(MeshError::Obj(format!(
+                        "line {}: face has fewer than 3 vertices",
+                        ln + 1
+                    )));
                 }
                 for k in 1..idx.len() - 1 {
                     mesh.triangles.push([idx[0], idx[k], idx[k + 1]]);
@@ -80,10 +96,16 @@ mod tests {
         let m = super::parse("# c\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nf 1/1 2/1 3/1 4/1\nf -4//1 -3//1 -2//1\n").unwrap();
         assert_eq!(m.triangles, vec![[0, 1, 2], [0, 2, 3], [0, 1, 2]]);
         assert_eq!(super::parse(&super::to_text(&m)).unwrap(), m);
-        assert!(super::parse("v 0 0\n").unwrap_err().contains("line 1"));
+        assert!(
+            super::parse("v 0 0\n")
+                .unwrap_err()
+                .to_string()
+                .contains("line 1")
+        );
         assert!(
             super::parse("v 0 0 0\nf 1 2 3\n")
                 .unwrap_err()
+                .to_string()
                 .contains("out of range")
         );
     }

@@ -231,7 +231,7 @@ pub fn load_mesh(path: &Path) -> Result<TriMesh, Broken> {
         "stl" => stl::parse(&bytes).map_err(|e| e.to_string()),
         "obj" => String::from_utf8(bytes)
             .map_err(|_| "not UTF-8 text".to_string())
-            .and_then(|t| obj::parse(&t)),
+            .and_then(|t| obj::parse(&t).map_err(|e| e.to_string())),
         other => Err(format!(
             "unsupported mesh format {other:?} (physnap reads .obj and .stl)"
         )),

@@ -52,6 +52,7 @@
 //! surface for `closest_point`. Queries at the surface itself are inherently ambiguous for
 //! the inside test.
 
+use crate::mesh::MeshError;
 use rayon::prelude::*;
 
 mod build;
@@ -181,28 +182,28 @@ impl MeshBvh {
     ///
     /// Errors when a triangle references a vertex index out of range or a vertex with a
     /// non-finite coordinate, or when there are more than `u32::MAX` triangles.
-    pub fn new(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Result<MeshBvh, String> {
+    pub fn new(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Result<MeshBvh, MeshError> {
         if u32::try_from(triangles.len()).is_err() {
-            return Err(format!(
+            return Err(MeshError::Triangles(format!(
                 "{} triangles exceed the u32 index range",
                 triangles.len()
-            ));
+            )));
         }
         for (t, tri) in triangles.iter().enumerate() {
             for &i in tri {
                 match positions.get(i as usize) {
                     None => {
-                        return Err(format!(
+                        return Err(MeshError::Triangles(format!(
                             "triangle {t} references vertex index {i}, but there are only {} \
                              positions",
                             positions.len()
-                        ));
+                        )));
                     }
                     Some(p) if !p.iter().all(|c| c.is_finite()) => {
-                        return Err(format!(
+                        return Err(MeshError::Triangles(format!(
                             "triangle {t} references vertex {i} with a non-finite coordinate \
                              {p:?}"
-                        ));
+                        )));
                     }
                     Some(_) => {}
                 }

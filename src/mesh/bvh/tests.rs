@@ -748,13 +748,15 @@ fn is_send_sync_and_handles_non_finite_queries() {
 #[test]
 fn bad_indices_and_coordinates_are_errors() {
     let positions = [[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
-    let err = MeshBvh::new(&positions, &[[0, 1, 2], [0, 7, 2]]).unwrap_err();
+    let err = MeshBvh::new(&positions, &[[0, 1, 2], [0, 7, 2]])
+        .unwrap_err()
+        .to_string();
     assert!(
         err.contains("triangle 1") && err.contains("index 7"),
         "{err}"
     );
     let bad = [[0.0; 3], [f32::NAN, 0.0, 0.0], [0.0, 1.0, 0.0]];
-    let err = MeshBvh::new(&bad, &[[0, 1, 2]]).unwrap_err();
+    let err = MeshBvh::new(&bad, &[[0, 1, 2]]).unwrap_err().to_string();
     assert!(
         err.contains("triangle 0") && err.contains("vertex 1"),
         "{err}"

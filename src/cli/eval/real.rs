@@ -312,25 +312,29 @@ pub fn eval_real(a: EvalRealArgs) -> anyhow::Result<()> {
                 joint_motion,
                 ..Default::default()
             };
+            // Draws `n` samples of `req` on this scan, moving the bar and `done` along.
+            let draw = |req: &GenerateRequest, n: usize, done: &mut usize| -> anyhow::Result<_> {
+                let d0 = *done;
+                let s = draw_samples(
+                    &models.denoiser,
+                    &shapes,
+                    &models.manifest.feature_scales,
+                    &schedule,
+                    req,
+                    n,
+                    &points,
+                    &mut |k| pb.set_position((d0 + k) as u64),
+                )?;
+                *done += n;
+                Ok(s)
+            };
             let prior = if n_prior > 0 {
                 let req = GenerateRequest {
                     category_guidance: a.sampling.category.weight(false),
                     category_guidance_below: Some(a.sampling.category.below(false)),
                     ..base.clone()
                 };
-                let d0 = done;
-                let s = draw_samples(
-                    &models.denoiser,
-                    &shapes,
-                    &models.manifest.feature_scales,
-                    &schedule,
-                    &req,
-                    1,
-                    &points,
-                    &mut |k| pb.set_position((d0 + k) as u64),
-                )?;
-                done += 1;
-                s
+                draw(&req, 1, &mut done)?
             } else {
                 Vec::new()
             };
@@ -343,19 +347,7 @@ pub fn eval_real(a: EvalRealArgs) -> anyhow::Result<()> {
                     category_guidance_below: Some(a.sampling.category.below(true)),
                     ..base.clone()
                 };
-                let d0 = done;
-                let s = draw_samples(
-                    &models.denoiser,
-                    &shapes,
-                    &models.manifest.feature_scales,
-                    &schedule,
-                    &req,
-                    n_guided,
-                    &points,
-                    &mut |k| pb.set_position((d0 + k) as u64),
-                )?;
-                done += n_guided;
-                s
+                draw(&req, n_guided, &mut done)?
             } else {
                 Vec::new()
             };

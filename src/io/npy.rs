@@ -267,13 +267,7 @@ pub fn from_bytes(bytes: &[u8]) -> Result<(usize, usize, Vec<f32>), NpyError> {
             )));
         }
     };
-    let need = rows.checked_mul(cols).and_then(|n| n.checked_mul(4));
-    if need.is_none_or(|n| n > bytes.len()) {
-        return Err(NpyError::Truncated {
-            expected_bytes: need.map_or(u64::MAX, |n| n as u64),
-            got_bytes: bytes.len(),
-        });
-    }
+    // `read_data` checks the size against the file before it allocates.
     let data = read_data(bytes, &header, rows, cols)?;
     Ok((rows, cols, data))
 }

@@ -297,14 +297,7 @@ fn job_from(v: &Value) -> Option<JobResult> {
             clean: s["clean"].as_bool()?,
             rest_depth: s["rest_depth"].as_f64(),
             sweep_depth: s["sweep_depth"].as_f64(),
-            worst_bodies: s["worst_bodies"]
-                .as_array()
-                .map(|a| {
-                    a.iter()
-                        .filter_map(|x| x.as_str().map(String::from))
-                        .collect()
-                })
-                .unwrap_or_default(),
+            worst_bodies: strings(&s["worst_bodies"]),
             error: s["error"].as_str().map(String::from),
         }),
     };
@@ -405,14 +398,7 @@ pub fn sim_check(
             clean: r["clean"].as_bool().unwrap_or(false),
             rest_depth: r["rest_depth"].as_f64(),
             sweep_depth: r["sweep_depth"].as_f64(),
-            worst_bodies: r["worst"]["bodies"]
-                .as_array()
-                .map(|a| {
-                    a.iter()
-                        .filter_map(|x| x.as_str().map(String::from))
-                        .collect()
-                })
-                .unwrap_or_default(),
+            worst_bodies: strings(&r["worst"]["bodies"]),
             error: r["error"].as_str().map(String::from),
         })
         .collect())
@@ -439,6 +425,17 @@ pub fn sim_probe(python: &Path, script: &Path) -> Result<String, RealFileError> 
         return Err(err(String::from_utf8_lossy(&out.stderr).trim().to_string()));
     }
     Ok(String::from_utf8_lossy(&out.stdout).trim().to_string())
+}
+
+/// The strings of a JSON array (none when it is not one).
+fn strings(v: &Value) -> Vec<String> {
+    v.as_array()
+        .map(|a| {
+            a.iter()
+                .filter_map(|x| x.as_str().map(String::from))
+                .collect()
+        })
+        .unwrap_or_default()
 }
 
 #[cfg(test)]

@@ -7,13 +7,13 @@ use clap::Args;
 use physnap::data::categories::category_index;
 use physnap::engine::EngineError;
 use physnap::engine::generate::{
-    GenerateRequest, JointMotion, PartShapes, Retrieval, generate_with as run_generate,
+    GenerateRequest, JointMotion, PartShapes, RepairMode, Retrieval, generate_with as run_generate,
 };
 use physnap::engine::guidance::{GuidanceOptions, SdfField};
 use physnap::engine::sample::Sampler;
 use physnap::engine::schedule::Schedule;
 use physnap::eval::guided::metrics as guided_metrics;
-use physnap::export::{ExportOptions, export_dir};
+use physnap::export::{ExportOptions, export_dir_with_repairs};
 use physnap::io::manifest::{LoadedModels, load_models};
 use physnap::mesh::MeshingOptions;
 use physnap::model::shape_prior::LatentSdfDecoder;
@@ -71,9 +71,56 @@ pub(crate) struct GenerateArgs {
         env = "PHYSNAP_W_MOB"
     )]
     pub(crate) w_mob: Option<f64>,
+    /// Sensor position x,y,z (object frame, metres) the scan was taken from; repeat the flag
+    /// (or separate with ';' in PHYSNAP_CAMERA) for several views. Turns on the free-space loss
+    /// ℓ_free and the removal of parts in space the camera saw through.
+    #[arg(
+        long = "camera",
+        env = "PHYSNAP_CAMERA",
+        value_delimiter = ';',
+        value_name = "X,Y,Z"
+    )]
+    pub(crate) cameras: Vec<String>,
+    /// Weight of the free-space loss (default with --camera: 15, ℓ_pc's; 0 turns it off).
+    #[arg(
+        long,
+        help_heading = "Guidance weights",
+        hide_short_help = true,
+        env = "PHYSNAP_W_FREE"
+    )]
+    pub(crate) w_free: Option<f64>,
+    /// Joint repair and part removal: on (default: hinges onto their part's edge or centre
+    /// line, axes snapped to box axes, children attached, parts the scan does not allow
+    /// removed; listed in object.json and ranking.json) or off (the raw projection).
+    #[arg(long, env = "PHYSNAP_REPAIR", default_value = "on", value_parser = ["on", "off"])]
+    pub(crate) repair: String,
     /// Sampler and guidance schedule.
     #[command(flatten)]
     pub(crate) sampling: SamplingArgs,
+}
+
+/// `--camera` values ("x,y,z" each) as points.
+pub(crate) fn parse_cameras(values: &[String]) -> anyhow::Result<Vec<[f32; 3]>> {
+    values
+        .iter()
+        .map(|v| {
+            let c: Vec<f32> = v
+                .split(',')
+                .map(|x| x.trim().parse::<f32>())
+                .collect::<Result<_, _>>()
+                .ok()
+                .filter(|c: &Vec<f32>| c.len() == 3 && c.iter().all(|x| x.is_finite()))
+                .with_context(|| {
+                    format!("invalid --camera {v:?}: expected x,y,z (three finite numbers, metres)")
+                })?;
+            Ok([c[0], c[1], c[2]])
+        })
+        .collect()
+}
+
+/// The `--repair` flag (clap has checked the name).
+pub(crate) fn repair_mode(flag: &str) -> RepairMode {
+    RepairMode::parse(flag).unwrap_or(RepairMode::On)
 }
 
 /// The category-guidance flag of every command that samples locally.
@@ -172,6 +219,8 @@ impl SamplingArgs {
             w_pc,
             w_pen,
             w_mob,
+            cameras: Vec::new(),
+            w_free: 0.0,
             steps: self.guidance_steps,
             tau: self.tau,
             max_step: max_step(self.guidance_max_step),
@@ -266,6 +315,7 @@ pub(crate) fn generate(a: GenerateArgs) -> anyhow::Result<()> {
         category_guidance: a.sampling.category.weight(loss_guided),
         category_guidance_below: Some(a.sampling.category.below(loss_guided)),
         joint_motion: joint_motion(&a.sampling.joint_motion)?,
+        repair: repair_mode(&a.repair),
         ..Default::default()
     };
     req.meshing.validate()?;
@@ -335,7 +385,7 @@ pub(crate) fn generate(a: GenerateArgs) -> anyhow::Result<()> {
     for g in &results {
         let name = format!("sample_{:03}", g.index);
         let dir = a.out.join(&name);
-        export_dir(&g.object, &g.meshes, &dir, &opts)?;
+        export_dir_with_repairs(&g.object, &g.meshes, &g.repairs, &dir, &opts)?;
         println!(
             "{}: {} parts, {} joints (seed {})",
             dir.display(),
@@ -343,6 +393,12 @@ pub(crate) fn generate(a: GenerateArgs) -> anyhow::Result<()> {
             g.object.joints.len(),
             g.seed
         );
+        for r in &g.repairs {
+            println!("  repair {} {}: {}", r.child, r.rule.as_str(), r.detail);
+        }
+        for r in &g.removed {
+            println!("  removed {} ({}): {}", r.part, r.reason.as_str(), r.detail);
+        }
         if !g.retrieved.is_empty() {
             println!(
                 "  parts {:?} took their nearest codebook shape (--retrieval {})",
@@ -352,14 +408,19 @@ pub(crate) fn generate(a: GenerateArgs) -> anyhow::Result<()> {
         }
         if let Some(opts) = &guidance {
             let m = guided_metrics(&decoder, &g.raw, &g.object, &g.meshes, &opts.points, g.seed);
-            rows.push((name, g.seed, m));
+            rows.push(RankRow {
+                name,
+                seed: g.seed,
+                metrics: m,
+                changes: changes_json(g),
+            });
         }
     }
     println!("{per_sample:.1} s per sample (sampling + meshing)");
     if let Some(l) = last_losses {
         println!(
-            "last guided step: ℓ_pc {:.4e}, ℓ_pen {:.4e}, ℓ_mob {:.4e}, weighted {:.4e}",
-            l.pc, l.pen, l.mob, l.total
+            "last guided step: ℓ_pc {:.4e}, ℓ_pen {:.4e}, ℓ_mob {:.4e}, ℓ_free {:.4e}, weighted {:.4e}",
+            l.pc, l.pen, l.mob, l.free, l.total
         );
     }
     if let (Some(opts), Some(points)) = (&guidance, &a.points) {
@@ -387,14 +448,41 @@ pub(crate) fn guidance_options(a: &GenerateArgs) -> anyhow::Result<Option<Guidan
     if points.is_empty() && a.w_pc.is_some_and(|w| w > 0.0) {
         bail!("invalid --w-pc: needs --points (the observed point cloud)");
     }
+    let cameras = parse_cameras(&a.cameras)?;
+    if points.is_empty() && !cameras.is_empty() {
+        bail!("invalid --camera: needs --points (the scan the camera took)");
+    }
     if points.is_empty() && a.w_pen.is_none() && a.w_mob.is_none() {
         return Ok(None);
     }
     let weights =
         GuidanceOptions::weights_or_defaults([a.w_pc, a.w_pen, a.w_mob], !points.is_empty());
-    let opts = a.sampling.guidance(points, weights);
+    let opts = a
+        .sampling
+        .guidance(points, weights)
+        .with_cameras(cameras, a.w_free);
     opts.validate(Schedule::default().len())?;
     Ok(Some(opts))
+}
+
+/// One sample of `ranking.json`.
+pub(crate) struct RankRow {
+    pub(crate) name: String,
+    pub(crate) seed: u64,
+    pub(crate) metrics: physnap::eval::guided::GuidedMetrics,
+    /// `repairs` and `removed` (see [`changes_json`]).
+    pub(crate) changes: serde_json::Value,
+}
+
+/// What repair changed in a sample: the number of joint repairs (object.json lists them) and
+/// the removed parts with their reason.
+pub(crate) fn changes_json(g: &physnap::engine::generate::Generated) -> serde_json::Value {
+    serde_json::json!({
+        "repairs": g.repairs.len(),
+        "removed": g.removed.iter().map(|r| serde_json::json!({
+            "part": r.part, "reason": r.reason.as_str(), "detail": r.detail,
+        })).collect::<Vec<_>>(),
+    })
 }
 
 /// `ranking.json`: samples by ascending D_pc (the paper's best-of-N), the best one marked.
@@ -402,11 +490,11 @@ pub(crate) fn write_ranking(
     out: &Path,
     points: &Path,
     opts: &GuidanceOptions,
-    rows: Vec<(String, u64, physnap::eval::guided::GuidedMetrics)>,
+    rows: Vec<RankRow>,
     diverged: &[(String, u64, String)],
 ) -> anyhow::Result<()> {
     // Rows come in sample order (sample_000, sample_001, ...), so ties stay in name order.
-    let rows = physnap::eval::rank::ranked(rows, |r| r.2.d_pc);
+    let rows = physnap::eval::rank::ranked(rows, |r| r.metrics.d_pc);
     let num = |v: f64| {
         if v.is_finite() {
             serde_json::json!(v)
@@ -417,28 +505,33 @@ pub(crate) fn write_ranking(
     let ranked: Vec<serde_json::Value> = rows
         .iter()
         .enumerate()
-        .map(|(r, (name, seed, m))| {
-            serde_json::json!({
+        .map(|(r, row)| {
+            let m = &row.metrics;
+            let mut v = serde_json::json!({
                 "rank": r + 1,
-                "sample": name,
-                "seed": seed,
+                "sample": row.name,
+                "seed": row.seed,
                 "best": r == 0,
                 "d_pc": num(m.d_pc),
                 "e_pc": num(m.e_pc),
                 "e_pen": num(m.e_pen),
                 "e_mob": num(m.e_mob),
                 "o_mesh": num(m.o_mesh),
-            })
+            });
+            if let (Some(v), Some(c)) = (v.as_object_mut(), row.changes.as_object()) {
+                v.extend(c.clone());
+            }
+            v
         })
         .collect();
-    let best = rows.first().map(|r| r.0.clone());
+    let best = rows.first().map(|r| r.name.clone());
     let doc = serde_json::json!({
         "format": "physnap.ranking/v1",
         "points": points.display().to_string(),
         "ranked_by": "d_pc (mean point-to-mesh distance, m)",
         "guidance": {
-            "w_pc": opts.w_pc, "w_pen": opts.w_pen, "w_mob": opts.w_mob,
-            "steps": opts.steps, "tau": opts.tau,
+            "w_pc": opts.w_pc, "w_pen": opts.w_pen, "w_mob": opts.w_mob, "w_free": opts.w_free,
+            "cameras": opts.cameras, "steps": opts.steps, "tau": opts.tau,
         },
         "best": best,
         "samples": ranked,
@@ -448,11 +541,12 @@ pub(crate) fn write_ranking(
     });
     let path = out.join("ranking.json");
     std::fs::write(&path, serde_json::to_string_pretty(&doc)? + "\n")?;
-    for (r, (name, _, m)) in rows.iter().enumerate() {
+    for (r, row) in rows.iter().enumerate() {
+        let m = &row.metrics;
         println!(
             "{}{}: D_pc {:.4} E_pc {:.5} E_pen {:.5} E_mob {:.5}",
             if r == 0 { "best " } else { "     " },
-            name,
+            row.name,
             m.d_pc,
             m.e_pc,
             m.e_pen,

@@ -18,13 +18,23 @@
 //! range, compared in units of the range channels' feature scales ([`range_units`]); the
 //! engine's default is NAP's (every joint a screw), the CLI and the service default to
 //! dominant.
+//!
+//! Repair ([`RepairMode::On`], physnap's, not NAP's; the CLI's and the service's default): after
+//! projection the joints are repaired (`graph::repair`: attach, snap, pivot on an edge or the
+//! centre line), and after meshing the leaf parts the scan does not allow are removed
+//! ([`super::prune`]: empty, in the cameras' free space, floating). Both are listed in
+//! [`Generated::repairs`] and [`Generated::removed`]. The engine's default is off: the raw
+//! projection, byte for byte.
 
 use std::ops::ControlFlow;
 
 use super::EngineError;
+use super::free_space::FreeSpace;
 use super::guidance::{GuidanceOptions, SdfField};
+use super::prune::{Removed, prune};
 use super::sample::{GuidanceContext, SampleRequest, Sampler, StepEvent, sample_guided};
 use super::schedule::Schedule;
+use crate::graph::repair::{Repair, repair};
 use crate::graph::{FeatureScales, GraphTensor, ProjectOptions, project};
 use crate::mesh::{MeshingOptions, TriMesh, part_mesh};
 use crate::model::codebook::Codebook;
@@ -119,6 +129,35 @@ impl JointMotion {
     }
 }
 
+/// Whether the projection is repaired and unsupported parts removed (module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum RepairMode {
+    /// The raw projection (NAP).
+    #[default]
+    Off,
+    /// `graph::repair` after projection, `prune` after meshing.
+    On,
+}
+
+impl RepairMode {
+    /// Wire / flag name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            RepairMode::Off => "off",
+            RepairMode::On => "on",
+        }
+    }
+
+    /// Parse a wire / flag name (`on`, `off`).
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "on" => Some(RepairMode::On),
+            "off" => Some(RepairMode::Off),
+            _ => None,
+        }
+    }
+}
+
 /// The shape side of generation: the decoder that meshes latent parts, the SDF the guidance
 /// losses query, and the retrieval codebook.
 #[derive(Clone, Copy)]
@@ -162,6 +201,8 @@ pub struct GenerateRequest {
     pub category_guidance_below: Option<usize>,
     /// How many motions each joint keeps.
     pub joint_motion: JointMotion,
+    /// Joint repair and part removal.
+    pub repair: RepairMode,
 }
 
 /// One generated sample.
@@ -177,8 +218,13 @@ pub struct Generated {
     pub object: ArticulatedObject,
     /// Part meshes, object frame at rest.
     pub meshes: Vec<TriMesh>,
-    /// Parts whose code was replaced by the nearest codebook code, ascending.
+    /// Parts whose code was replaced by the nearest codebook code, ascending (indices before
+    /// [`Generated::removed`]).
     pub retrieved: Vec<usize>,
+    /// What [`RepairMode::On`] changed in the joints, in order.
+    pub repairs: Vec<Repair>,
+    /// The parts [`RepairMode::On`] removed, in order.
+    pub removed: Vec<Removed>,
 }
 
 /// Progress of a generation request.
@@ -311,6 +357,10 @@ pub fn generate_with(
                 value: e.to_string(),
             })
         })?;
+        let repairs = match req.repair {
+            RepairMode::On => repair(&mut object),
+            RepairMode::Off => Vec::new(),
+        };
         let codebook = shapes.codebook.filter(|_| req.retrieval != Retrieval::Off);
         // All / Category: every latent code is replaced before meshing, so each part is meshed
         // once.
@@ -338,6 +388,17 @@ pub fn generate_with(
                 &req.meshing,
             )?;
         }
+        let removed = match req.repair {
+            RepairMode::On => {
+                let free = req
+                    .guidance
+                    .as_ref()
+                    .filter(|g| !g.cameras.is_empty())
+                    .map(|g| FreeSpace::new(&g.points, &g.cameras));
+                prune(&mut object, &mut meshes, free.as_ref())
+            }
+            RepairMode::Off => Vec::new(),
+        };
         out.push(Generated {
             index: i,
             seed,
@@ -345,6 +406,8 @@ pub fn generate_with(
             object,
             meshes,
             retrieved,
+            repairs,
+            removed,
         });
     }
     Ok(out)

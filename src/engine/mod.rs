@@ -5,8 +5,10 @@
 //! current rayon pool, reports every step through a callback (progress, cancellation, previews)
 //! and returns raw graphs for projection and export.
 
+pub mod free_space;
 pub mod generate;
 pub mod guidance;
+pub mod prune;
 pub mod sample;
 pub mod schedule;
 

@@ -765,6 +765,8 @@ pub fn run_rows(
                     w_pc: s.w_pc,
                     w_pen: s.w_pen,
                     w_mob: s.w_mob,
+                    cameras: Vec::new(),
+                    w_free: 0.0,
                     steps: s.steps,
                     tau: s.tau,
                     max_step: opts.max_step,

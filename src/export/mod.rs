@@ -106,6 +106,18 @@ pub fn export_dir(
     out: &Path,
     opts: &ExportOptions,
 ) -> Result<ExportReport, ExportError> {
+    export_dir_with_repairs(obj, meshes, &[], out, opts)
+}
+
+/// [`export_dir`] of a generated object, with the joint repairs generation made listed in
+/// `object.json` (`repairs`).
+pub fn export_dir_with_repairs(
+    obj: &ArticulatedObject,
+    meshes: &[TriMesh],
+    repairs: &[crate::graph::repair::Repair],
+    out: &Path,
+    opts: &ExportOptions,
+) -> Result<ExportReport, ExportError> {
     obj.validate()?;
     if meshes.len() != obj.parts.len() {
         return Err(CoreError::invalid(
@@ -136,7 +148,7 @@ pub fn export_dir(
     put("robot.zip", &zip_bundle(&bundle)?)?;
     put(
         "object.json",
-        crate::io::object_json::to_string(obj).as_bytes(),
+        crate::io::object_json::to_string_with_repairs(obj, repairs).as_bytes(),
     )?;
     Ok(ExportReport {
         files,

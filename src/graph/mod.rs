@@ -19,6 +19,7 @@
 //! `[1, 0, 0]` followed by ten zeros.
 
 pub mod project;
+pub mod repair;
 
 use crate::error::{CoreError, CoreResult};
 use crate::kinematics::PluckerLine;

@@ -25,6 +25,7 @@ use serde::{Deserialize, Serialize};
 
 use super::FormatError;
 use crate::error::CoreError;
+use crate::graph::repair::Repair;
 use crate::object::{ArticulatedObject, Joint, JointKind, Part};
 use crate::shape::{Axis, PartShape, Primitive};
 
@@ -42,6 +43,19 @@ struct ObjectDoc {
     parts: Vec<PartDoc>,
     #[serde(default)]
     joints: Vec<JointDoc>,
+    /// What generation's joint repair changed (graph::repair): informational, accepted and
+    /// dropped on read.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    repairs: Vec<RepairDoc>,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RepairDoc {
+    joint: String,
+    rule: String,
+    amount: f64,
+    detail: String,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -144,7 +158,22 @@ pub fn read(path: &std::path::Path) -> Result<ArticulatedObject, FormatError> {
 
 /// Serialise a (valid) object to pretty JSON.
 pub fn to_string(obj: &ArticulatedObject) -> String {
-    let doc = to_doc(obj);
+    to_string_with_repairs(obj, &[])
+}
+
+/// [`to_string`] with the joint repairs generation made, as `"repairs": [{"joint": <child
+/// part>, "rule", "amount", "detail"}]` (omitted when empty).
+pub fn to_string_with_repairs(obj: &ArticulatedObject, repairs: &[Repair]) -> String {
+    let mut doc = to_doc(obj);
+    doc.repairs = repairs
+        .iter()
+        .map(|r| RepairDoc {
+            joint: r.child.clone(),
+            rule: r.rule.as_str().into(),
+            amount: r.amount,
+            detail: r.detail.clone(),
+        })
+        .collect();
     // Serialising plain structs of numbers and strings cannot fail.
     serde_json::to_string_pretty(&doc).unwrap_or_default()
 }
@@ -299,6 +328,7 @@ fn to_doc(obj: &ArticulatedObject) -> ObjectDoc {
                 prismatic: j.kind.slides().then_some(j.prismatic),
             })
             .collect(),
+        repairs: Vec::new(),
     }
 }
 

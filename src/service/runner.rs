@@ -204,6 +204,8 @@ pub fn guidance_of(spec: &JobSpec, schedule_steps: usize) -> Option<GuidanceOpti
         w_pc: spec.w_pc,
         w_pen: spec.w_pen,
         w_mob: spec.w_mob,
+        cameras: Vec::new(),
+        w_free: 0.0,
         steps: spec.guidance_threshold(schedule_steps),
         tau: spec.tau,
         max_step: spec.guidance_max_step,
@@ -292,6 +294,7 @@ pub fn run_job(
         category_guidance: spec.category_guidance,
         category_guidance_below: Some(spec.category_guidance_below as usize),
         joint_motion: spec.joint_motion,
+        repair: crate::engine::generate::RepairMode::On,
     };
     let decoder = LatentSdfDecoder::new(&m.shape_prior.decoder);
     let started = Instant::now();
@@ -432,7 +435,8 @@ pub fn run_job(
     let glb = glb::build(&chosen.object, &chosen.meshes, &opts)?;
     let bundle = urdf::build(&chosen.object, &chosen.meshes, &opts);
     let zip = zip_bundle(&bundle)?;
-    let json = crate::io::object_json::to_string(&chosen.object).into_bytes();
+    let json = crate::io::object_json::to_string_with_repairs(&chosen.object, &chosen.repairs)
+        .into_bytes();
     Ok(JobOutput {
         files: vec![
             ("model.glb".into(), glb),

@@ -29,7 +29,7 @@ use physnap::eval::real::{
     GtObject, JobResult, JobSample, RowKind, RowSpec, ScanResult, best_of, draw_samples,
     object_metrics, report, row_specs,
 };
-use physnap::export::{ExportOptions, export_dir};
+use physnap::export::{ExportOptions, export_dir_with_repairs};
 use physnap::io::manifest::load_models;
 use physnap::io::real::{
     ScanRecord, read_scan_result, read_scan_set, scan_json, sim_check, sim_probe, write_json,
@@ -38,7 +38,7 @@ use physnap::mesh::MeshingOptions;
 use physnap::model::shape_prior::LatentSdfDecoder;
 use physnap::pointcloud::{Limits, PointCloud};
 
-use crate::cli::generate::{SamplingArgs, joint_motion, retrieval_mode, sampler};
+use crate::cli::generate::{SamplingArgs, joint_motion, repair_mode, retrieval_mode, sampler};
 use crate::cli::progress_bar;
 
 /// The MuJoCo check, shipped inside the binary so an installed `physnap` has it.
@@ -93,6 +93,17 @@ pub struct EvalRealArgs {
     /// Weight of the mobility loss of the guided rows (default: `generate --points`').
     #[arg(long, env = "PHYSNAP_W_MOB")]
     w_mob: Option<f64>,
+    /// Weight of the free-space loss of the guided rows when the scan has a camera (default:
+    /// `generate --camera`'s).
+    #[arg(long, env = "PHYSNAP_W_FREE")]
+    w_free: Option<f64>,
+    /// Use each scan's recorded camera position (as `generate --camera`): use (default) or
+    /// ignore (the scan alone, as without a camera).
+    #[arg(long, env = "PHYSNAP_SCAN_CAMERA", default_value = "use", value_parser = ["use", "ignore"])]
+    scan_camera: String,
+    /// Joint repair and part removal, as `generate --repair`: on (default) or off.
+    #[arg(long, env = "PHYSNAP_REPAIR", default_value = "on", value_parser = ["on", "off"])]
+    repair: String,
     /// Sampler and guidance schedule.
     #[command(flatten)]
     sampling: SamplingArgs,
@@ -116,6 +127,9 @@ fn settings(a: &EvalRealArgs, rows: &[RowSpec]) -> serde_json::Value {
         "seed": a.seed,
         "resolution": a.resolution,
         "w": [a.w_pc, a.w_pen, a.w_mob],
+        "w_free": a.w_free,
+        "scan_camera": a.scan_camera,
+        "repair": a.repair,
         "sampling": format!("{:?}", a.sampling),
     })
 }
@@ -310,6 +324,7 @@ pub fn eval_real(a: EvalRealArgs) -> anyhow::Result<()> {
                     retrieval.without_category()
                 },
                 joint_motion,
+                repair: repair_mode(&a.repair),
                 ..Default::default()
             };
             // Draws `n` samples of `req` on this scan, moving the bar and `done` along.
@@ -339,7 +354,14 @@ pub fn eval_real(a: EvalRealArgs) -> anyhow::Result<()> {
                 Vec::new()
             };
             let guided = if n_guided > 0 {
-                let opts = a.sampling.guidance(points.clone(), [w_pc, w_pen, w_mob]);
+                let cameras = match (a.scan_camera.as_str(), scan.camera) {
+                    ("use", Some(c)) => vec![c.map(|v| v as f32)],
+                    _ => Vec::new(),
+                };
+                let opts = a
+                    .sampling
+                    .guidance(points.clone(), [w_pc, w_pen, w_mob])
+                    .with_cameras(cameras, a.w_free);
                 opts.validate(schedule.len())?;
                 let req = GenerateRequest {
                     guidance: Some(opts),
@@ -502,7 +524,7 @@ fn job(
         meshing,
         ..Default::default()
     };
-    match export_dir(&g.object, &g.meshes, dir, &opts) {
+    match export_dir_with_repairs(&g.object, &g.meshes, &g.repairs, dir, &opts) {
         Ok(_) => {
             let m = object_metrics(&g.object, &g.meshes, &gt.object, &gt.meshes, seed);
             if m.chamfer_diag.is_finite() {

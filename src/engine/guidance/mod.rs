@@ -2,7 +2,7 @@
 //! weighted sum, as burn tensor code differentiable back to x_t.
 //!
 //! ```text
-//! ℓ(x̂₀) = w_pc ℓ_pc + w_pen ℓ_pen + w_mob ℓ_mob
+//! ℓ(x̂₀) = w_pc ℓ_pc + w_pen ℓ_pen + w_mob ℓ_mob (+ w_free ℓ_free with a camera)
 //! paper:   w_pc,base = 45, w_pen,base = 2, w_mob,base = 2, each ÷ #active terms;
 //!          guided steps n_g = 500 (the last ones, t < n_g); τ = 1000
 //! physnap: the same, with w_pen and w_mob × 3 ([`DEFAULT_LOSS_SCALES`]) and every gradient
@@ -17,6 +17,7 @@
 //! validate`]) so bad requests fail before any sampling.
 
 pub mod field;
+pub mod free;
 pub mod grid;
 pub mod mob;
 pub mod pc;
@@ -37,6 +38,10 @@ pub const W_PC_BASE: f64 = 45.0;
 pub const W_PEN_BASE: f64 = 2.0;
 /// Paper base weight of ℓ_mob.
 pub const W_MOB_BASE: f64 = 2.0;
+/// physnap's default weight of ℓ_free when the request has a camera (real-scans.md §5; not in
+/// the paper): ℓ_pc's default weight with all three paper terms on (45 ÷ 3), so a free-space
+/// sample inside a part costs what an observed point off the surface does.
+pub const DEFAULT_W_FREE: f64 = W_PC_BASE / 3.0;
 /// Paper n_g.
 pub const DEFAULT_GUIDED_STEPS: usize = 500;
 /// Paper τ.
@@ -108,6 +113,11 @@ pub struct GuidanceOptions {
     pub w_pen: f64,
     /// Weight of ℓ_mob.
     pub w_mob: f64,
+    /// Sensor positions (object frame, metres) the scan was seen from; empty: unknown. With
+    /// `w_free > 0` they give ℓ_free (real-scans.md §5).
+    pub cameras: Vec<[f32; 3]>,
+    /// Weight of ℓ_free (0 without cameras).
+    pub w_free: f64,
     /// n_g: guide the last this many steps (t < n_g).
     pub steps: usize,
     /// τ of the soft assignment in ℓ_pc.
@@ -156,6 +166,8 @@ impl GuidanceOptions {
             w_pc: on(terms.pc, W_PC_BASE),
             w_pen: on(terms.pen, W_PEN_BASE),
             w_mob: on(terms.mob, W_MOB_BASE),
+            cameras: Vec::new(),
+            w_free: 0.0,
             steps: DEFAULT_GUIDED_STEPS,
             tau: DEFAULT_TAU,
             max_step: Some(DEFAULT_MAX_STEP),
@@ -190,6 +202,21 @@ impl GuidanceOptions {
         ]
     }
 
+    /// The same guidance seen from `cameras`, with ℓ_free at `w_free` (None: [`DEFAULT_W_FREE`]
+    /// when there is a camera, 0 without).
+    pub fn with_cameras(self, cameras: Vec<[f32; 3]>, w_free: Option<f64>) -> Self {
+        let w_free = match (cameras.is_empty(), w_free) {
+            (true, _) => 0.0,
+            (false, Some(w)) => w,
+            (false, None) => DEFAULT_W_FREE,
+        };
+        GuidanceOptions {
+            cameras,
+            w_free,
+            ..self
+        }
+    }
+
     /// The same guidance with w_pc, w_pen and w_mob multiplied by `scales` (in that order).
     pub fn with_loss_scales(self, scales: [f64; 3]) -> Self {
         let [pc, pen, mob] = scales;
@@ -214,6 +241,7 @@ impl GuidanceOptions {
             ("w_pc", self.w_pc),
             ("w_pen", self.w_pen),
             ("w_mob", self.w_mob),
+            ("w_free", self.w_free),
         ] {
             if !(w.is_finite() && (0.0..=MAX_WEIGHT).contains(&w)) {
                 return bad(name, format!("finite, in [0, {MAX_WEIGHT}]"), w.to_string());
@@ -274,6 +302,55 @@ impl GuidanceOptions {
                 format!("{p:?}"),
             );
         }
+        self.validate_cameras()
+    }
+
+    /// The cameras: at most [`free_space::MAX_CAMERAS`], finite, |coordinate| ≤ [`MAX_COORD`],
+    /// with points to look at, each outside the points' box (a sensor does not sit inside what
+    /// it scans; a camera there is almost always a frame mistake).
+    fn validate_cameras(&self) -> Result<(), EngineError> {
+        let bad = |field: String, limit: String, value: String| {
+            Err(EngineError::Invalid(crate::error::Invalid {
+                field: format!("guidance.{field}"),
+                limit,
+                value,
+            }))
+        };
+        use super::free_space::MAX_CAMERAS;
+        if self.cameras.len() > MAX_CAMERAS {
+            return bad(
+                "cameras".into(),
+                format!("at most {MAX_CAMERAS} cameras"),
+                format!("{} cameras", self.cameras.len()),
+            );
+        }
+        if !self.cameras.is_empty() && self.points.is_empty() {
+            return bad(
+                "cameras".into(),
+                "cameras only with observed points".into(),
+                format!("{} cameras, 0 points", self.cameras.len()),
+            );
+        }
+        let (lo, hi) = super::free_space::bounds(&self.points);
+        for (j, c) in self.cameras.iter().enumerate() {
+            if c.iter().any(|v| !(v.is_finite() && v.abs() <= MAX_COORD)) {
+                return bad(
+                    format!("cameras[{j}]"),
+                    format!("finite, |coordinate| ≤ {MAX_COORD}"),
+                    format!("{c:?}"),
+                );
+            }
+            if (0..3).all(|k| c[k] >= lo[k] && c[k] <= hi[k]) {
+                return bad(
+                    format!("cameras[{j}]"),
+                    format!(
+                        "outside the points' box [{:.3}, {:.3}] × [{:.3}, {:.3}] × [{:.3}, {:.3}] (object frame, metres)",
+                        lo[0], hi[0], lo[1], hi[1], lo[2], hi[2]
+                    ),
+                    format!("{c:?}"),
+                );
+            }
+        }
         Ok(())
     }
 
@@ -297,13 +374,20 @@ impl GuidanceOptions {
         GuidanceOptions {
             w_pc: 0.0,
             points: Vec::new(),
+            cameras: Vec::new(),
+            w_free: 0.0,
             ..self.clone()
         }
     }
 
     /// Whether any term has a positive weight.
     pub fn is_active(&self) -> bool {
-        weights_active(self.w_pc, self.w_pen, self.w_mob)
+        weights_active(self.w_pc, self.w_pen, self.w_mob) || self.free_active()
+    }
+
+    /// Whether ℓ_free is on (a camera and a positive weight).
+    pub fn free_active(&self) -> bool {
+        self.w_free > 0.0 && !self.cameras.is_empty() && !self.points.is_empty()
     }
 }
 
@@ -323,7 +407,9 @@ pub struct GuidanceLosses {
     pub pen: f64,
     /// ℓ_mob.
     pub mob: f64,
-    /// w_pc ℓ_pc + w_pen ℓ_pen + w_mob ℓ_mob.
+    /// ℓ_free (0 without a camera).
+    pub free: f64,
+    /// w_pc ℓ_pc + w_pen ℓ_pen + w_mob ℓ_mob + w_free ℓ_free.
     pub total: f64,
     /// max |∇_{x_t} ℓ| subtracted this step (model space).
     pub grad_max: f64,
@@ -414,6 +500,12 @@ pub fn guidance_loss(
             None => t,
         });
     };
+    let free = if opts.free_active() {
+        super::free_space::FreeSpace::new(&opts.points, &opts.cameras)
+    } else {
+        super::free_space::FreeSpace::new(&[], &[])
+    };
+    let free_samples = free.samples();
     for s in 0..b {
         let n = nodes.clone().narrow(0, s, 1).reshape([K, NODE_DIM]);
         let e = edges.clone().narrow(0, s, 1).reshape([NUM_EDGES, EDGE_DIM]);
@@ -440,8 +532,22 @@ pub fn guidance_loss(
                 add(l, opts.w_mob, &mut values.mob, &mut total);
             }
         }
+        if let Some(l) = free::loss(
+            field,
+            &d.parts,
+            d.exist.clone(),
+            &d.host,
+            &free_samples,
+            opts.points.len(),
+            0.5 * free.margin(),
+        ) {
+            add(l, opts.w_free, &mut values.free, &mut total);
+        }
     }
-    values.total = opts.w_pc * values.pc + opts.w_pen * values.pen + opts.w_mob * values.mob;
+    values.total = opts.w_pc * values.pc
+        + opts.w_pen * values.pen
+        + opts.w_mob * values.mob
+        + opts.w_free * values.free;
     (total, values)
 }
 

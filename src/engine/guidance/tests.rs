@@ -740,3 +740,108 @@ fn host_decoder_gradients_equal_burn_autodiff() {
         }
     }
 }
+
+/// A wall of scan points on x = 1 seen from a camera at x = −2, and a box part between them.
+fn carving_setup(part_x: f32) -> (GraphTensor, Vec<[f32; 3]>, [f32; 3]) {
+    let wall: Vec<[f32; 3]> = (0..12)
+        .flat_map(|i| (0..12).map(move |j| [1.0, -0.55 + 0.1 * i as f32, -0.55 + 0.1 * j as f32]))
+        .collect();
+    let mut g = GraphTensor::empty();
+    set_part(&mut g, 0, 1.0, [0.1, 0.6, 0.6], [1.1, 0.0, 0.0]);
+    set_part(&mut g, 1, 1.0, [0.2, 0.2, 0.2], [part_x, 0.0, 0.0]);
+    (g, wall, [-2.0, 0.0, 0.0])
+}
+
+fn free_loss(
+    g: &GraphTensor,
+    pts: &[[f32; 3]],
+    cam: [f32; 3],
+    dev: &burn::tensor::Device,
+) -> Option<Tensor<1>> {
+    let field = BoxField { latent: LATENT };
+    let (n, e) = tensors(g, dev);
+    let d = decode(n, e, LATENT);
+    let fs = crate::engine::free_space::FreeSpace::new(pts, &[cam]);
+    free::loss(
+        &field,
+        &d.parts,
+        d.exist.clone(),
+        &d.host,
+        &fs.samples(),
+        pts.len(),
+        0.5 * fs.margin(),
+    )
+}
+
+#[test]
+fn free_space_loss_carves_a_part_between_the_camera_and_the_points() {
+    // In front of the wall (in the camera's free space): penalised; the wall part behind its
+    // own points is not.
+    let (g, pts, cam) = carving_setup(0.0);
+    let v = free_loss(&g, &pts, cam, &cpu()).map(|t| t.into_scalar::<f32>());
+    assert!(v.is_some_and(|v| v > 0.0), "{v:?}");
+    let (g, pts, cam) = carving_setup(-3.0);
+    assert!(
+        free_loss(&g, &pts, cam, &cpu()).is_none(),
+        "behind the camera: no free space there"
+    );
+    // Descending the loss moves the part out of the free space, shrinks it or fades it.
+    let (mut g, pts, cam) = carving_setup(0.0);
+    let first = free_loss(&g, &pts, cam, &cpu())
+        .unwrap()
+        .into_scalar::<f32>();
+    let dev = cpu_autodiff();
+    for _ in 0..40 {
+        let (n, e) = tensors(&g, &dev);
+        let n = n.require_grad();
+        let d = decode(n.clone(), e, LATENT);
+        let fs = crate::engine::free_space::FreeSpace::new(&pts, &[cam]);
+        let field = BoxField { latent: LATENT };
+        let Some(l) = free::loss(
+            &field,
+            &d.parts,
+            d.exist.clone(),
+            &d.host,
+            &fs.samples(),
+            pts.len(),
+            0.5 * fs.margin(),
+        ) else {
+            break;
+        };
+        let grads = l.backward();
+        let gn: Vec<f32> = n.grad(&grads).unwrap().into_data().try_to_vec().unwrap();
+        for (x, dx) in g.nodes.iter_mut().zip(gn) {
+            *x -= (dx * 0.05).clamp(-0.02, 0.02);
+        }
+    }
+    let last = free_loss(&g, &pts, cam, &cpu()).map_or(0.0, |t| t.into_scalar::<f32>());
+    assert!(last < 0.2 * first, "ℓ_free {first} → {last}");
+}
+
+#[test]
+fn bad_cameras_name_field_limit_value() {
+    let pts = vec![[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]];
+    let base = GuidanceOptions::defaults(pts, Terms::ALL);
+    let ok = base.clone().with_cameras(vec![[-1.0, 0.5, 0.5]], None);
+    assert!(ok.validate(1000).is_ok());
+    assert_eq!(ok.w_free, DEFAULT_W_FREE);
+    assert_eq!(base.clone().with_cameras(Vec::new(), Some(3.0)).w_free, 0.0);
+    let msg = |o: GuidanceOptions| o.validate(1000).unwrap_err().to_string();
+    let inside = msg(base.clone().with_cameras(vec![[0.5, 0.5, 0.5]], None));
+    assert!(
+        inside.contains("guidance.cameras[0]") && inside.contains("outside the points' box"),
+        "{inside}"
+    );
+    let nan = msg(base.clone().with_cameras(vec![[-1.0, f32::NAN, 0.0]], None));
+    assert!(
+        nan.contains("guidance.cameras[0]") && nan.contains("finite"),
+        "{nan}"
+    );
+    let many = msg(base.clone().with_cameras(vec![[-1.0, 0.0, 0.0]; 17], None));
+    assert!(
+        many.contains("guidance.cameras") && many.contains("at most 16") && many.contains("17"),
+        "{many}"
+    );
+    let w = msg(base.with_cameras(vec![[-1.0, 0.0, 0.0]], Some(-2.0)));
+    assert!(w.contains("guidance.w_free") && w.contains("-2"), "{w}");
+}

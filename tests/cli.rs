@@ -404,3 +404,127 @@ fn eval_guided_refuses_unknown_variants_and_empty_cloud_folders() {
     assert_eq!(json["rows"][1]["guidance"]["tau"], 100.0);
     assert_eq!(json["rows"][1]["guidance"]["w_pc"], 45.0);
 }
+
+const SCAN: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/scan_microwave.ply");
+const WEIGHTS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/weights");
+
+/// A short guided `generate` of the example scan with extra flags.
+fn generate(out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "generate",
+        "--weights",
+        WEIGHTS,
+        "--points",
+        SCAN,
+        "--category",
+        "Microwave",
+        "--steps",
+        "8",
+        "--guidance-refine-steps",
+        "2",
+        "--resolution",
+        "16",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    physnap(&args, &[])
+}
+
+#[test]
+fn a_camera_turns_on_free_space_and_ranking_json_lists_every_term() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("g");
+    let o = generate(&out, &["--samples", "2", "--camera", "-0.9,0.3,0.6"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("ℓ_free"), "{stdout}");
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("ranking.json")).unwrap()).unwrap();
+    assert_eq!(r["guidance"]["w_free"], 15.0);
+    assert_eq!(r["guidance"]["cameras"].as_array().unwrap().len(), 1);
+    let samples = r["samples"].as_array().unwrap();
+    assert_eq!(samples.len(), 2);
+    let scores: Vec<f64> = samples
+        .iter()
+        .map(|s| s["score"].as_f64().unwrap())
+        .collect();
+    assert!(scores[0] <= scores[1], "ranked by score: {scores:?}");
+    for s in samples {
+        for t in [
+            "d_pc_per_scan_diagonal",
+            "free",
+            "attach_per_object_diagonal",
+            "o_mesh",
+        ] {
+            assert!(s["terms"][t].is_number(), "{t} missing in {s}");
+        }
+        let sum: f64 = [
+            "d_pc_per_scan_diagonal",
+            "free",
+            "attach_per_object_diagonal",
+            "o_mesh",
+        ]
+        .iter()
+        .map(|t| s["terms"][t].as_f64().unwrap())
+        .sum();
+        assert!((sum - s["score"].as_f64().unwrap()).abs() < 1e-9, "{s}");
+        assert!(s["removed"].is_array() && s["repairs"].is_number(), "{s}");
+    }
+}
+
+#[test]
+fn bad_cameras_name_the_flag_the_limit_and_the_value() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("g");
+    let err = stderr(&generate(&out, &["--camera", "0,0,0.1"]));
+    assert!(
+        err.contains("guidance.cameras[0]")
+            && err.contains("outside the points' box")
+            && err.contains("0.1"),
+        "{err}"
+    );
+    let err = stderr(&generate(&out, &["--camera", "nan,0,1"]));
+    assert!(
+        err.contains("--camera") && err.contains("nan,0,1") && err.contains("finite"),
+        "{err}"
+    );
+    let err = stderr(&generate(&out, &["--camera", "1,2"]));
+    assert!(err.contains("--camera") && err.contains("x,y,z"), "{err}");
+    let many = vec!["-1,0,0"; 17].join(";");
+    let o = physnap(
+        &[
+            "generate",
+            "--weights",
+            WEIGHTS,
+            "--points",
+            SCAN,
+            "--steps",
+            "8",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &[("PHYSNAP_CAMERA", &many)],
+    );
+    let err = stderr(&o);
+    assert!(
+        err.contains("guidance.cameras") && err.contains("at most 16") && err.contains("17"),
+        "{err}"
+    );
+    let err = stderr(&physnap(
+        &[
+            "generate",
+            "--weights",
+            WEIGHTS,
+            "--camera",
+            "-1,0,0",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &[],
+    ));
+    assert!(
+        err.contains("--camera") && err.contains("--points"),
+        "{err}"
+    );
+}

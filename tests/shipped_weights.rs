@@ -162,3 +162,65 @@ fn sparse_meshing_of_shipped_shapes_equals_the_dense_grid() {
     );
     assert!(evaluated * 2 < total, "decoded {evaluated} of {total}");
 }
+
+#[test]
+fn repair_off_is_the_raw_projection_and_on_lists_what_it_changed() {
+    use physnap::engine::generate::{JointMotion, RepairMode, range_units};
+    use physnap::graph::{ProjectOptions, project};
+    let dev = physnap::model::cpu();
+    let models = load_models(weights(), &dev).unwrap();
+    let decoder = LatentSdfDecoder::new(&models.shape_prior.decoder);
+    let scales = &models.manifest.feature_scales;
+    let mut changed = 0;
+    for seed in 0..4 {
+        let run = |repair| {
+            let req = GenerateRequest {
+                seed,
+                samples: 1,
+                steps: 20,
+                meshing: MeshingOptions { resolution: 16 },
+                joint_motion: JointMotion::Dominant,
+                repair,
+                ..Default::default()
+            };
+            generate(
+                &models.denoiser,
+                &decoder,
+                None,
+                scales,
+                &Schedule::default(),
+                &req,
+                &mut |_| ControlFlow::Continue(()),
+            )
+            .unwrap()
+            .remove(0)
+        };
+        let (off, on) = (run(RepairMode::Off), run(RepairMode::On));
+        assert!(off.repairs.is_empty() && off.removed.is_empty());
+        // Off: exactly the projection of the raw graph.
+        let projected = project(
+            &off.raw,
+            &ProjectOptions {
+                name: "sample_000".into(),
+                dominant_motion: Some(range_units(scales)),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let text = physnap::io::object_json::to_string;
+        assert_eq!(text(&off.object), text(&projected));
+        assert_eq!(off.raw, on.raw, "repair does not touch sampling");
+        if on.repairs.is_empty() && on.removed.is_empty() {
+            assert_eq!(text(&on.object), text(&off.object));
+        } else {
+            changed += 1;
+            assert_ne!(text(&on.object), text(&off.object));
+            assert_eq!(
+                on.object.parts.len() + on.removed.len(),
+                off.object.parts.len()
+            );
+            on.object.validate().unwrap();
+        }
+    }
+    assert!(changed > 0, "no sample of 4 needed a repair");
+}

@@ -78,7 +78,8 @@ pub(crate) struct GenerateArgs {
         long = "camera",
         env = "PHYSNAP_CAMERA",
         value_delimiter = ';',
-        value_name = "X,Y,Z"
+        value_name = "X,Y,Z",
+        allow_hyphen_values = true
     )]
     pub(crate) cameras: Vec<String>,
     /// Weight of the free-space loss (default with --camera: 15, ℓ_pc's; 0 turns it off).
@@ -408,10 +409,19 @@ pub(crate) fn generate(a: GenerateArgs) -> anyhow::Result<()> {
         }
         if let Some(opts) = &guidance {
             let m = guided_metrics(&decoder, &g.raw, &g.object, &g.meshes, &opts.points, g.seed);
+            let terms = physnap::eval::rank::rank_terms(
+                &g.object,
+                &g.meshes,
+                &opts.points,
+                &opts.cameras,
+                m.d_pc,
+                m.o_mesh,
+            );
             rows.push(RankRow {
                 name,
                 seed: g.seed,
                 metrics: m,
+                terms,
                 changes: changes_json(g),
             });
         }
@@ -470,6 +480,7 @@ pub(crate) struct RankRow {
     pub(crate) name: String,
     pub(crate) seed: u64,
     pub(crate) metrics: physnap::eval::guided::GuidedMetrics,
+    pub(crate) terms: physnap::eval::rank::RankTerms,
     /// `repairs` and `removed` (see [`changes_json`]).
     pub(crate) changes: serde_json::Value,
 }
@@ -485,7 +496,8 @@ pub(crate) fn changes_json(g: &physnap::engine::generate::Generated) -> serde_js
     })
 }
 
-/// `ranking.json`: samples by ascending D_pc (the paper's best-of-N), the best one marked.
+/// `ranking.json`: samples by ascending score (`eval::rank`), the best one marked, each with
+/// its terms.
 pub(crate) fn write_ranking(
     out: &Path,
     points: &Path,
@@ -494,7 +506,7 @@ pub(crate) fn write_ranking(
     diverged: &[(String, u64, String)],
 ) -> anyhow::Result<()> {
     // Rows come in sample order (sample_000, sample_001, ...), so ties stay in name order.
-    let rows = physnap::eval::rank::ranked(rows, |r| r.metrics.d_pc);
+    let rows = physnap::eval::rank::ranked(rows, |r| r.terms.score());
     let num = |v: f64| {
         if v.is_finite() {
             serde_json::json!(v)
@@ -517,6 +529,13 @@ pub(crate) fn write_ranking(
                 "e_pen": num(m.e_pen),
                 "e_mob": num(m.e_mob),
                 "o_mesh": num(m.o_mesh),
+                "score": num(row.terms.score()),
+                "terms": {
+                    "d_pc_per_scan_diagonal": num(row.terms.d_pc / row.terms.scan_diagonal),
+                    "free": num(row.terms.free),
+                    "attach_per_object_diagonal": num(row.terms.attach / row.terms.object_diagonal),
+                    "o_mesh": num(row.terms.o_mesh),
+                },
             });
             if let (Some(v), Some(c)) = (v.as_object_mut(), row.changes.as_object()) {
                 v.extend(c.clone());
@@ -528,7 +547,7 @@ pub(crate) fn write_ranking(
     let doc = serde_json::json!({
         "format": "physnap.ranking/v1",
         "points": points.display().to_string(),
-        "ranked_by": "d_pc (mean point-to-mesh distance, m)",
+        "ranked_by": "score = D_pc / scan diagonal + free-space share + attachment gap / object diagonal + O_mesh (lower is better)",
         "guidance": {
             "w_pc": opts.w_pc, "w_pen": opts.w_pen, "w_mob": opts.w_mob, "w_free": opts.w_free,
             "cameras": opts.cameras, "steps": opts.steps, "tau": opts.tau,
@@ -544,10 +563,14 @@ pub(crate) fn write_ranking(
     for (r, row) in rows.iter().enumerate() {
         let m = &row.metrics;
         println!(
-            "{}{}: D_pc {:.4} E_pc {:.5} E_pen {:.5} E_mob {:.5}",
+            "{}{}: score {:.4} D_pc {:.4} free {:.3} attach {:.4} O_mesh {:.3} E_pc {:.5} E_pen {:.5} E_mob {:.5}",
             if r == 0 { "best " } else { "     " },
             row.name,
+            row.terms.score(),
             m.d_pc,
+            row.terms.free,
+            row.terms.attach,
+            m.o_mesh,
             m.e_pc,
             m.e_pen,
             m.e_mob

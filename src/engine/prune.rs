@@ -101,8 +101,8 @@ fn verdict(
             continue;
         };
         for &p in &pts {
-            if let Some((_, d, _)) = bvh.closest_point(p) {
-                nearest = nearest.min(d);
+            if let Some((_, d2, _)) = bvh.closest_point(p) {
+                nearest = nearest.min(d2.sqrt());
             }
             if nearest <= touch {
                 return None;

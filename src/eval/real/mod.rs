@@ -131,8 +131,10 @@ pub struct JobSample {
     pub index: usize,
     /// Its seed.
     pub seed: u64,
-    /// D_pc of the sample (the ranking key; NaN without surface).
+    /// D_pc of the sample (NaN without surface).
     pub d_pc: f64,
+    /// The ranking score (`eval::rank`; NaN without surface).
+    pub score: f64,
     /// Wall time of this sample (sampling + meshing + D_pc), seconds.
     pub seconds: f64,
     /// The sample, or why there is none (diverged, projection failed, ...).
@@ -164,15 +166,24 @@ pub fn draw_samples(
         let r = generate_with(denoiser, shapes, scales, schedule, &one, &mut |_| {
             ControlFlow::Continue(())
         });
-        let (outcome, d) = match r {
+        let (outcome, d): (_, (f64, f64)) = match r {
             Ok(mut v) if !v.is_empty() => {
                 let mut g = v.remove(0);
                 g.index = k;
                 g.object.name = format!("sample_{k:03}");
                 let d = d_pc(&g.meshes, points);
-                (Ok(g), d)
+                let cameras = req.guidance.as_ref().map_or(&[][..], |o| &o.cameras[..]);
+                let o_mesh = crate::eval::guided::mesh_overlap(
+                    &g.object,
+                    &g.meshes,
+                    crate::eval::guided::MESH_OVERLAP_SAMPLES,
+                    one.seed,
+                );
+                let terms =
+                    crate::eval::rank::rank_terms(&g.object, &g.meshes, points, cameras, d, o_mesh);
+                (Ok(g), (d, terms.score()))
             }
-            Ok(_) => (Err("no sample returned".to_string()), f64::NAN),
+            Ok(_) => (Err("no sample returned".to_string()), (f64::NAN, f64::NAN)),
             Err(
                 e @ (EngineError::Invalid(crate::error::Invalid { .. })
                 | EngineError::Stopped { .. }),
@@ -180,17 +191,18 @@ pub fn draw_samples(
                 // A projection failure is the sample's; other invalid options are the run's.
                 if matches!(&e, EngineError::Invalid(crate::error::Invalid { field, .. }) if field == "sample")
                 {
-                    (Err(e.to_string()), f64::NAN)
+                    (Err(e.to_string()), (f64::NAN, f64::NAN))
                 } else {
                     return Err(e.into());
                 }
             }
-            Err(e) => (Err(e.to_string()), f64::NAN),
+            Err(e) => (Err(e.to_string()), (f64::NAN, f64::NAN)),
         };
         out.push(JobSample {
             index: k,
             seed: one.seed,
-            d_pc: d,
+            d_pc: d.0,
+            score: d.1,
             seconds: started.elapsed().as_secs_f64(),
             outcome,
         });
@@ -199,12 +211,12 @@ pub fn draw_samples(
     Ok(out)
 }
 
-/// The `best` of the first `n` samples as `generate`'s ranking.json marks it: lowest D_pc
+/// The `best` of the first `n` samples as `generate`'s ranking.json marks it: lowest score
 /// (non-finite last), ties by index; None when none of them produced an object.
 pub fn best_of(samples: &[JobSample], n: usize) -> Option<usize> {
     let key = |s: &JobSample| {
-        if s.d_pc.is_finite() {
-            s.d_pc
+        if s.score.is_finite() {
+            s.score
         } else {
             f64::INFINITY
         }
@@ -502,6 +514,7 @@ mod tests {
             index,
             seed: index as u64,
             d_pc: f64::NAN,
+            score: f64::NAN,
             seconds: 1.0,
             outcome: Err("diverged".into()),
         };

@@ -273,6 +273,63 @@ impl ArticulatedObject {
     pub fn states_at(&self, f: f64) -> Vec<JointState> {
         self.joints.iter().map(|j| j.state_at(f)).collect()
     }
+
+    /// The same object uniformly scaled by `f` > 0 about the origin: boxes, centres, joint
+    /// origins, slide ranges and primitive shapes (latent shapes live in the box's normalised
+    /// frame and need nothing; angles are unchanged).
+    pub fn scaled(&self, f: f64) -> ArticulatedObject {
+        let prim = |p: &Primitive| match *p {
+            Primitive::Cuboid {
+                center,
+                half_extents,
+            } => Primitive::Cuboid {
+                center: center * f,
+                half_extents: half_extents * f,
+            },
+            Primitive::Sphere { center, radius } => Primitive::Sphere {
+                center: center * f,
+                radius: radius * f,
+            },
+            Primitive::Cylinder {
+                center,
+                axis,
+                radius,
+                half_height,
+            } => Primitive::Cylinder {
+                center: center * f,
+                axis,
+                radius: radius * f,
+                half_height: half_height * f,
+            },
+        };
+        ArticulatedObject {
+            parts: self
+                .parts
+                .iter()
+                .map(|p| Part {
+                    half_extents: p.half_extents * f,
+                    center: p.center * f,
+                    shape: match &p.shape {
+                        PartShape::Primitives(list) => {
+                            PartShape::Primitives(list.iter().map(prim).collect())
+                        }
+                        other => other.clone(),
+                    },
+                    ..p.clone()
+                })
+                .collect(),
+            joints: self
+                .joints
+                .iter()
+                .map(|j| Joint {
+                    origin: Point3::from(j.origin.coords * f),
+                    prismatic: [j.prismatic[0] * f, j.prismatic[1] * f],
+                    ..j.clone()
+                })
+                .collect(),
+            ..self.clone()
+        }
+    }
 }
 
 impl ArticulatedObject {

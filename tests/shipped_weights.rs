@@ -224,3 +224,50 @@ fn repair_off_is_the_raw_projection_and_on_lists_what_it_changed() {
     }
     assert!(changed > 0, "no sample of 4 needed a repair");
 }
+
+#[test]
+fn a_scale_hypothesis_samples_in_the_scaled_frame_and_returns_the_scans() {
+    let dev = physnap::model::cpu();
+    let models = load_models(weights(), &dev).unwrap();
+    let decoder = LatentSdfDecoder::new(&models.shape_prior.decoder);
+    let run = |scale| {
+        let req = GenerateRequest {
+            seed: 3,
+            samples: 1,
+            steps: 20,
+            meshing: MeshingOptions { resolution: 16 },
+            scale,
+            ..Default::default()
+        };
+        generate(
+            &models.denoiser,
+            &decoder,
+            None,
+            &models.manifest.feature_scales,
+            &Schedule::default(),
+            &req,
+            &mut |_| ControlFlow::Continue(()),
+        )
+    };
+    let text = physnap::io::object_json::to_string;
+    let plain = run(None).unwrap().remove(0);
+    assert_eq!(
+        text(&run(Some(1.0)).unwrap()[0].object),
+        text(&plain.object)
+    );
+    // Unguided, the sample is the same; the object comes back divided by the scale.
+    let half = run(Some(2.0)).unwrap().remove(0);
+    assert_eq!(half.raw, plain.raw);
+    assert_eq!(half.scale, 2.0);
+    let expect = plain.object.scaled(0.5);
+    for (a, b) in half.object.parts.iter().zip(&expect.parts) {
+        assert!(
+            (a.center - b.center).norm() < 1e-12
+                && (a.half_extents - b.half_extents).norm() < 1e-12
+        );
+    }
+    for s in [0.0, f64::NAN, 100.0] {
+        let e = run(Some(s)).unwrap_err().to_string();
+        assert!(e.contains("scale") && e.contains("[0.0625, 16]"), "{e}");
+    }
+}

@@ -7,7 +7,8 @@ use clap::Args;
 use physnap::data::categories::category_index;
 use physnap::engine::EngineError;
 use physnap::engine::generate::{
-    GenerateRequest, JointMotion, PartShapes, RepairMode, Retrieval, generate_with as run_generate,
+    GenerateRequest, JointMotion, PartShapes, RepairMode, Retrieval, auto_scale,
+    generate_with as run_generate,
 };
 use physnap::engine::guidance::{GuidanceOptions, SdfField};
 use physnap::engine::sample::Sampler;
@@ -95,9 +96,39 @@ pub(crate) struct GenerateArgs {
     /// removed; listed in object.json and ranking.json) or off (the raw projection).
     #[arg(long, env = "PHYSNAP_REPAIR", default_value = "on", value_parser = ["on", "off"])]
     pub(crate) repair: String,
+    /// Scale hypothesis: auto (default: the scan is scaled so its size is the category's
+    /// typical size in the training data, the result scaled back), off, or a factor.
+    #[arg(long, env = "PHYSNAP_SCALE", default_value = "auto")]
+    pub(crate) scale: String,
     /// Sampler and guidance schedule.
     #[command(flatten)]
     pub(crate) sampling: SamplingArgs,
+}
+
+/// The `--scale` flag for a scan of `points` (empty: no scan) of `category`: auto is the
+/// engine's [`auto_scale`] with the procedural generator's typical size, off is None.
+pub(crate) fn scale_of(
+    flag: &str,
+    points: &[[f32; 3]],
+    category: Option<&str>,
+) -> anyhow::Result<Option<f64>> {
+    match flag {
+        "off" => Ok(None),
+        "auto" => Ok(auto_scale(
+            points,
+            category.and_then(physnap::data::synth::typical_diagonal),
+        )),
+        v => {
+            let s: f64 = v
+                .parse()
+                .ok()
+                .filter(|s: &f64| s.is_finite())
+                .with_context(|| {
+                    format!("invalid --scale {v:?}: expected auto, off or a finite number")
+                })?;
+            Ok(Some(s))
+        }
+    }
 }
 
 /// `--camera` values ("x,y,z" each) as points.
@@ -317,6 +348,11 @@ pub(crate) fn generate(a: GenerateArgs) -> anyhow::Result<()> {
         category_guidance_below: Some(a.sampling.category.below(loss_guided)),
         joint_motion: joint_motion(&a.sampling.joint_motion)?,
         repair: repair_mode(&a.repair),
+        scale: scale_of(
+            &a.scale,
+            guidance.as_ref().map_or(&[][..], |g| &g.points[..]),
+            category.map(|i| models.manifest.categories[i].as_str()),
+        )?,
         ..Default::default()
     };
     req.meshing.validate()?;
@@ -408,7 +444,15 @@ pub(crate) fn generate(a: GenerateArgs) -> anyhow::Result<()> {
             );
         }
         if let Some(opts) = &guidance {
-            let m = guided_metrics(&decoder, &g.raw, &g.object, &g.meshes, &opts.points, g.seed);
+            let m = guided_metrics(
+                &decoder,
+                &g.raw,
+                &g.object,
+                &g.meshes,
+                &opts.points,
+                g.scale,
+                g.seed,
+            );
             let terms = physnap::eval::rank::rank_terms(
                 &g.object,
                 &g.meshes,

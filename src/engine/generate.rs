@@ -19,6 +19,13 @@
 //! engine's default is NAP's (every joint a screw), the CLI and the service default to
 //! dominant.
 //!
+//! Scale ([`GenerateRequest::scale`], physnap's): the prior draws objects of its training
+//! sizes, so a scan of a much smaller or larger object was wrapped in an object of the usual
+//! size. With a scale s the scan (and cameras) are multiplied by s about the origin (the floor
+//! stays at z = 0), the sample is drawn and projected in that frame, and the object is divided
+//! by s before repair and meshing (latent shapes live in the box's normalised frame, so only
+//! boxes, centres, origins and slide ranges change).
+//!
 //! Repair ([`RepairMode::On`], physnap's, not NAP's; the CLI's and the service's default): after
 //! projection the joints are repaired (`graph::repair`: attach, snap, pivot on an edge or the
 //! centre line), and after meshing the leaf parts the scan does not allow are removed
@@ -203,6 +210,24 @@ pub struct GenerateRequest {
     pub joint_motion: JointMotion,
     /// Joint repair and part removal.
     pub repair: RepairMode,
+    /// Scale hypothesis (module docs): the scan and its cameras are multiplied by this before
+    /// sampling, the object divided by it after projection. None (or 1): the scan as given.
+    pub scale: Option<f64>,
+}
+
+/// Smallest and largest accepted [`GenerateRequest::scale`].
+pub const SCALE_RANGE: [f64; 2] = [1.0 / 16.0, 16.0];
+
+/// Most an automatic scale hypothesis changes a scan's size (either way).
+pub const AUTO_SCALE_LIMIT: f64 = 4.0;
+
+/// The automatic scale hypothesis: the scale that gives the scan's box diagonal (≈ 0.99 of the
+/// object's on the real-asset benchmark's views) the prior's `typical` diagonal for the
+/// category, within ×/÷ [`AUTO_SCALE_LIMIT`]; None without points or a typical size.
+pub fn auto_scale(points: &[[f32; 3]], typical: Option<f64>) -> Option<f64> {
+    let d = super::free_space::extent(points) as f64;
+    let t = typical.filter(|t| t.is_finite() && *t > 0.0)?;
+    (d.is_finite() && d > 1e-6).then(|| (t / d).clamp(1.0 / AUTO_SCALE_LIMIT, AUTO_SCALE_LIMIT))
 }
 
 /// One generated sample.
@@ -212,8 +237,12 @@ pub struct Generated {
     pub index: usize,
     /// Seed it was drawn with.
     pub seed: u64,
-    /// The raw (unscaled) graph the model produced.
+    /// The raw (unscaled) graph the model produced, in the sampling frame (the scan times
+    /// [`Generated::scale`]).
     pub raw: GraphTensor,
+    /// The scale hypothesis the sample was drawn under (1: none); `object` and `meshes` are
+    /// back in the scan's frame.
+    pub scale: f64,
     /// The projected object (latent part shapes).
     pub object: ArticulatedObject,
     /// Part meshes, object frame at rest.
@@ -312,6 +341,31 @@ pub fn generate_with(
         }
         _ => None,
     };
+    let scale = match req.scale {
+        Some(s) if !(s.is_finite() && (SCALE_RANGE[0]..=SCALE_RANGE[1]).contains(&s)) => {
+            return Err(EngineError::Invalid(crate::error::Invalid {
+                field: "scale".into(),
+                limit: format!("finite, in [{}, {}]", SCALE_RANGE[0], SCALE_RANGE[1]),
+                value: s.to_string(),
+            }));
+        }
+        Some(s) if s != 1.0 => Some(s),
+        _ => None,
+    };
+    // The guidance in the sampling frame.
+    let guidance = match (&req.guidance, scale) {
+        (Some(g), Some(s)) => {
+            let mul = |v: &[[f32; 3]]| -> Vec<[f32; 3]> {
+                v.iter().map(|p| p.map(|x| (x as f64 * s) as f32)).collect()
+            };
+            Some(GuidanceOptions {
+                points: mul(&g.points),
+                cameras: mul(&g.cameras),
+                ..g.clone()
+            })
+        }
+        (g, _) => g.clone(),
+    };
     let device = crate::model::cpu();
     let mut out = Vec::with_capacity(req.samples);
     for i in 0..req.samples {
@@ -324,7 +378,7 @@ pub fn generate_with(
                 batch: 1,
                 category: req.category,
                 preview_every: req.preview_every,
-                guidance: req.guidance.clone(),
+                guidance: guidance.clone(),
                 sampler: req.sampler,
                 steps: req.steps,
                 category_guidance: req.category_guidance,
@@ -357,6 +411,9 @@ pub fn generate_with(
                 value: e.to_string(),
             })
         })?;
+        if let Some(s) = scale {
+            object = object.scaled(1.0 / s);
+        }
         let repairs = match req.repair {
             RepairMode::On => repair(&mut object),
             RepairMode::Off => Vec::new(),
@@ -403,6 +460,7 @@ pub fn generate_with(
             index: i,
             seed,
             raw,
+            scale: scale.unwrap_or(1.0),
             object,
             meshes,
             retrieved,

@@ -259,19 +259,31 @@ pub fn d_pc(meshes: &[TriMesh], points: &[[f32; 3]]) -> f64 {
 }
 
 /// Every metric of a generated sample (`obj` and `meshes` as generation returns them; O_mesh
-/// sampled with `seed`).
+/// sampled with `seed`). `raw` was drawn under the scale hypothesis `scale` (1: none), so
+/// E_pc, E_pen and E_mob are measured in that frame (the points times `scale`); D_pc and
+/// O_mesh in the scan's.
 pub fn metrics(
     field: &dyn SdfField,
     raw: &GraphTensor,
     obj: &ArticulatedObject,
     meshes: &[TriMesh],
     points: &[[f32; 3]],
+    scale: f64,
     seed: u64,
 ) -> GuidedMetrics {
+    let sdf = if scale == 1.0 {
+        sdf_metrics(field, raw, points)
+    } else {
+        let scaled: Vec<[f32; 3]> = points
+            .iter()
+            .map(|p| p.map(|x| (x as f64 * scale) as f32))
+            .collect();
+        sdf_metrics(field, raw, &scaled)
+    };
     GuidedMetrics {
         d_pc: d_pc(meshes, points),
         o_mesh: mesh_overlap(obj, meshes, MESH_OVERLAP_SAMPLES, seed),
-        ..sdf_metrics(field, raw, points)
+        ..sdf
     }
 }
 
@@ -812,6 +824,7 @@ pub fn run_rows(
                                 &g.object,
                                 &g.meshes,
                                 &cloud.points,
+                                g.scale,
                                 g.seed,
                             );
                             let all = [m.e_pc, m.d_pc, m.e_pen, m.e_mob, m.o_mesh];

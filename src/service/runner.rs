@@ -295,6 +295,7 @@ pub fn run_job(
         category_guidance_below: Some(spec.category_guidance_below as usize),
         joint_motion: spec.joint_motion,
         repair: crate::engine::generate::RepairMode::On,
+        scale: None,
     };
     let decoder = LatentSdfDecoder::new(&m.shape_prior.decoder);
     let started = Instant::now();

@@ -38,7 +38,9 @@ use physnap::mesh::MeshingOptions;
 use physnap::model::shape_prior::LatentSdfDecoder;
 use physnap::pointcloud::{Limits, PointCloud};
 
-use crate::cli::generate::{SamplingArgs, joint_motion, repair_mode, retrieval_mode, sampler};
+use crate::cli::generate::{
+    SamplingArgs, joint_motion, repair_mode, retrieval_mode, sampler, scale_of,
+};
 use crate::cli::progress_bar;
 
 /// The MuJoCo check, shipped inside the binary so an installed `physnap` has it.
@@ -101,6 +103,10 @@ pub struct EvalRealArgs {
     /// ignore (the scan alone, as without a camera).
     #[arg(long, env = "PHYSNAP_SCAN_CAMERA", default_value = "use", value_parser = ["use", "ignore"])]
     scan_camera: String,
+    /// Scale hypothesis of the guided rows, as `generate --scale`: auto (default), off or a
+    /// factor.
+    #[arg(long, env = "PHYSNAP_SCALE", default_value = "auto")]
+    scale: String,
     /// Joint repair and part removal, as `generate --repair`: on (default) or off.
     #[arg(long, env = "PHYSNAP_REPAIR", default_value = "on", value_parser = ["on", "off"])]
     repair: String,
@@ -130,6 +136,7 @@ fn settings(a: &EvalRealArgs, rows: &[RowSpec]) -> serde_json::Value {
         "w_free": a.w_free,
         "scan_camera": a.scan_camera,
         "repair": a.repair,
+        "scale": a.scale,
         "sampling": format!("{:?}", a.sampling),
     })
 }
@@ -363,8 +370,14 @@ pub fn eval_real(a: EvalRealArgs) -> anyhow::Result<()> {
                     .guidance(points.clone(), [w_pc, w_pen, w_mob])
                     .with_cameras(cameras, a.w_free);
                 opts.validate(schedule.len())?;
+                let scale = scale_of(
+                    &a.scale,
+                    &points,
+                    cat.map(|i| models.manifest.categories[i].as_str()),
+                )?;
                 let req = GenerateRequest {
                     guidance: Some(opts),
+                    scale,
                     category_guidance: a.sampling.category.weight(true),
                     category_guidance_below: Some(a.sampling.category.below(true)),
                     ..base.clone()

@@ -65,6 +65,26 @@ pub fn generate(category: &str, rng: &mut Rng) -> Result<LabelledObject, DataErr
     }
 }
 
+/// Draws behind [`typical_diagonal`].
+const TYPICAL_DRAWS: usize = 64;
+
+/// The median box diagonal (metres, at rest) of `category`'s procedural objects — the size the
+/// prior trained on them draws — from [`TYPICAL_DRAWS`] draws of a fixed seed; None for a
+/// category the generator does not make.
+pub fn typical_diagonal(category: &str) -> Option<f64> {
+    let mut rng = Rng::new(0x7e51_2e);
+    let mut d: Vec<f64> = (0..TYPICAL_DRAWS)
+        .filter_map(|_| generate(category, &mut rng).ok())
+        .map(|o| crate::graph::repair::diagonal(&o.object))
+        .filter(|d| d.is_finite() && *d > 0.0)
+        .collect();
+    if d.is_empty() {
+        return None;
+    }
+    d.sort_by(f64::total_cmp);
+    Some(d[d.len() / 2])
+}
+
 /// Draw objects of `category` until one passes [`validity::check`] with default options;
 /// returns it and the number of rejected draws. After `max_attempts` draws without success the
 /// error names the category, the number of attempts and the last violation.

@@ -303,3 +303,20 @@ fn reversed_joints_of_generated_objects_are_caught() {
     }
     assert!(caught > 50, "{caught}");
 }
+
+#[test]
+fn typical_diagonals_lie_in_the_generators_ranges() {
+    // real-scans.md §4: box diagonals of 300 objects (data synth --seed 5) per category.
+    for (c, lo, hi) in [
+        ("StorageFurniture", 0.87, 2.36),
+        ("Microwave", 0.51, 0.78),
+        ("Oven", 0.98, 1.39),
+        ("Laptop", 0.33, 0.44),
+    ] {
+        let d = typical_diagonal(c).unwrap();
+        println!("{c}: {d:.3}");
+        assert!((lo..=hi).contains(&d), "{c}: {d}");
+    }
+    assert_eq!(typical_diagonal("Faucet"), None);
+    assert_eq!(typical_diagonal("Door"), typical_diagonal("door"));
+}

@@ -7,10 +7,12 @@
 # Defaults: DATA=real, OUT=out/levers, VIEWS=1 (the first view of each of the 25 objects; 0:
 # all 75 scans). Each configuration is one `physnap eval real --rows guided` run:
 #
-#   none     --repair off --scan-camera ignore   (the pipeline without the levers)
-#   camera   --repair off --scan-camera use      (ℓ_free from the scan's camera)
-#   repair   --repair on  --scan-camera ignore   (joint repair + part removal, no camera)
-#   all      --repair on  --scan-camera use      (the defaults)
+#   none     --repair off --scan-camera ignore --scale off   (the pipeline without the levers)
+#   camera   --repair off --scan-camera use    --scale off   (ℓ_free from the scan's camera)
+#   repair   --repair on  --scan-camera ignore --scale off   (joint repair + part removal)
+#   scale    --repair off --scan-camera ignore --scale auto  (the scale hypothesis)
+#   all      --repair on  --scan-camera use    --scale off   (camera + repair)
+#   default  (no flags: repair on, camera used, scale auto)
 #
 # A stopped run resumes (eval real skips finished scans). PHYSNAP_BIN names the binary
 # (default: physnap on PATH); PHYSNAP_PYTHON the Python with mujoco (default: DATA/venv's).
@@ -29,13 +31,15 @@ run() {
     --python "$PY" "$@" >"$OUT/$name.log" 2>&1
 }
 mkdir -p "$OUT"
-configs=${PHYSNAP_LEVERS:-"none camera repair all"}
+configs=${PHYSNAP_LEVERS:-"none camera repair scale all default"}
 for c in $configs; do
   case $c in
-    none) run none --repair off --scan-camera ignore ;;
-    camera) run camera --repair off --scan-camera use ;;
-    repair) run repair --repair on --scan-camera ignore ;;
-    all) run all --repair on --scan-camera use ;;
+    none) run none --repair off --scan-camera ignore --scale off ;;
+    camera) run camera --repair off --scan-camera use --scale off ;;
+    repair) run repair --repair on --scan-camera ignore --scale off ;;
+    scale) run scale --repair off --scan-camera ignore --scale auto ;;
+    all) run all --repair on --scan-camera use --scale off ;;
+    default) run default ;;
     *) echo "unknown configuration $c" >&2; exit 2 ;;
   esac
 done

@@ -72,7 +72,7 @@ const TYPICAL_DRAWS: usize = 64;
 /// prior trained on them draws — from [`TYPICAL_DRAWS`] draws of a fixed seed; None for a
 /// category the generator does not make.
 pub fn typical_diagonal(category: &str) -> Option<f64> {
-    let mut rng = Rng::new(0x7e51_2e);
+    let mut rng = Rng::new(0x007e_512e);
     let mut d: Vec<f64> = (0..TYPICAL_DRAWS)
         .filter_map(|_| generate(category, &mut rng).ok())
         .map(|o| crate::graph::repair::diagonal(&o.object))

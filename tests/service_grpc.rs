@@ -316,6 +316,9 @@ async fn cli_submit_watch_downloads_verified_artifacts() {
                 "5",
                 "--guidance-max-step",
                 "0.05",
+                "--camera=-2,0,0.5",
+                "--repair",
+                "off",
                 "--points",
             ])
             .arg(&ply2)
@@ -337,6 +340,12 @@ async fn cli_submit_watch_downloads_verified_artifacts() {
     // completed scans worse), in every step when a weight is asked for.
     assert_eq!(job.request.category_guidance, 0.0);
     assert_eq!(job.request.category_guidance_below, 1000);
+    // The scan's camera, at ℓ_free's default weight, and repair as asked.
+    assert_eq!(job.request.camera, vec![[-2.0, 0.0, 0.5]]);
+    assert_eq!(
+        (job.request.w_free, job.request.repair.as_str()),
+        (15.0, "off")
+    );
     for a in &job.artifacts {
         let bytes = std::fs::read(out.join(&a.name)).unwrap();
         assert_eq!(

@@ -316,6 +316,9 @@ async fn cli_submit_watch_downloads_verified_artifacts() {
                 "5",
                 "--guidance-max-step",
                 "0.05",
+                "--camera=-2,0,0.5",
+                "--repair",
+                "off",
                 "--points",
             ])
             .arg(&ply2)
@@ -337,6 +340,12 @@ async fn cli_submit_watch_downloads_verified_artifacts() {
     // completed scans worse), in every step when a weight is asked for.
     assert_eq!(job.request.category_guidance, 0.0);
     assert_eq!(job.request.category_guidance_below, 1000);
+    // The scan's camera, at ℓ_free's default weight, and repair as asked.
+    assert_eq!(job.request.camera, vec![[-2.0, 0.0, 0.5]]);
+    assert_eq!(
+        (job.request.w_free, job.request.repair.as_str()),
+        (15.0, "off")
+    );
     for a in &job.artifacts {
         let bytes = std::fs::read(out.join(&a.name)).unwrap();
         assert_eq!(
@@ -363,5 +372,152 @@ async fn cli_submit_watch_downloads_verified_artifacts() {
         "{}",
         String::from_utf8_lossy(&o.stderr)
     );
+    s.shutdown().await;
+}
+
+async fn artifact(
+    cl: &mut JobServiceClient<tonic::transport::Channel>,
+    id: &str,
+    name: &str,
+) -> Vec<u8> {
+    let mut chunks = cl
+        .get_artifact(pb::GetArtifactRequest {
+            id: id.into(),
+            name: name.into(),
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    let mut bytes = Vec::new();
+    while let Some(c) = chunks.next().await {
+        bytes.extend_from_slice(&c.unwrap().data);
+    }
+    bytes
+}
+
+/// Submits `spec`, waits for the job to succeed and returns its view and ranking.json.
+async fn run_to_ranking(
+    cl: &mut JobServiceClient<tonic::transport::Channel>,
+    spec: pb::JobSpec,
+) -> (serde_json::Value, serde_json::Value) {
+    let job = cl
+        .submit_job(pb::SubmitJobRequest {
+            spec: Some(spec),
+            request_id: String::new(),
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    let view: serde_json::Value = serde_json::from_str(&job.json).unwrap();
+    let last = watch(cl, &job.id, 0).await.pop().unwrap();
+    assert_eq!(last.state, pb::State::Succeeded as i32, "{}", last.json);
+    let ranking = serde_json::from_slice(&artifact(cl, &job.id, "ranking.json").await).unwrap();
+    (view, ranking)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn cameras_w_free_and_repair_reach_the_job_and_its_ranking() {
+    let s = start(Opts::default()).await;
+    let mut cl = JobServiceClient::connect(s.grpc_url()).await.unwrap();
+    // cloud(48) lies in [-0.5, 0.5] × [-0.3, 0.3] × [0.1, 0.9].
+    let flat: Vec<f32> = cloud(48).into_iter().flatten().collect();
+    let cam = |x, y, z| pb::Vec3 { x, y, z };
+    let quick = pb::JobSpec {
+        steps: Some(10),
+        n_g: Some(5),
+        refine_steps: Some(2),
+        resolution: Some(8),
+        ..spec(flat.clone())
+    };
+    let with = pb::JobSpec {
+        camera: vec![cam(-2.0, 0.0, 0.5), cam(0.0, -2.0, 0.5)],
+        w_free: Some(4.0),
+        ..quick.clone()
+    };
+    let (view, ranking) = run_to_ranking(&mut cl, with.clone()).await;
+    let req = &view["request"];
+    assert_eq!(
+        req["camera"],
+        serde_json::json!([[-2.0, 0.0, 0.5], [0.0, -2.0, 0.5]]),
+        "{req}"
+    );
+    assert_eq!(
+        (req["w_free"].as_f64(), req["repair"].as_str()),
+        (Some(4.0), Some("on")),
+        "{req}"
+    );
+    assert_eq!(ranking["guidance"]["w_free"], 4.0, "{ranking:#}");
+    assert_eq!(ranking["guidance"]["cameras"], req["camera"], "{ranking:#}");
+    assert_eq!(ranking["repair"], "on");
+    let row = &ranking["samples"][0];
+    assert!(row["repairs"].as_u64().is_some(), "{ranking:#}");
+    assert!(row["removed"].is_array(), "{ranking:#}");
+    // repair "off", one camera at the default ℓ_free weight.
+    let off = pb::JobSpec {
+        camera: vec![cam(-2.0, 0.0, 0.5)],
+        w_free: None,
+        repair: "off".into(),
+        ..quick.clone()
+    };
+    let (view, ranking) = run_to_ranking(&mut cl, off).await;
+    let req = &view["request"];
+    assert_eq!(
+        (req["w_free"].as_f64(), req["repair"].as_str()),
+        (Some(15.0), Some("off")),
+        "{req}"
+    );
+    assert_eq!(ranking["repair"], "off");
+    assert_eq!(ranking["samples"][0]["repairs"], 0, "{ranking:#}");
+    assert_eq!(
+        ranking["samples"][0]["removed"],
+        serde_json::json!([]),
+        "{ranking:#}"
+    );
+    // INVALID_ARGUMENT names the repeated field's entry, the limit and the value.
+    let cases: [(pb::JobSpec, &str, &str); 4] = [
+        (
+            pb::JobSpec {
+                camera: vec![cam(-2.0, 0.0, 0.5), cam(0.0, 0.0, 0.5)],
+                ..quick.clone()
+            },
+            "camera[1]",
+            "outside the points' box",
+        ),
+        (
+            pb::JobSpec {
+                camera: vec![cam(f64::NAN, 0.0, 0.5)],
+                ..quick.clone()
+            },
+            "camera[0]",
+            "3 finite numbers",
+        ),
+        (
+            pb::JobSpec {
+                w_free: Some(-1.0),
+                ..with.clone()
+            },
+            "w_free",
+            ">= 0",
+        ),
+        (
+            pb::JobSpec {
+                repair: "maybe".into(),
+                ..quick.clone()
+            },
+            "repair",
+            "\"on\" or \"off\"",
+        ),
+    ];
+    for (bad, field, limit) in cases {
+        let e = refused(&mut cl, bad).await;
+        assert_eq!(e.code(), tonic::Code::InvalidArgument);
+        assert_eq!(e.metadata().get("physnap-field").unwrap(), field);
+        // (The box's limit has a '×', which ASCII metadata cannot carry; the message has it.)
+        assert!(
+            e.message().contains(field) && e.message().contains(limit),
+            "{}",
+            e.message()
+        );
+    }
     s.shutdown().await;
 }

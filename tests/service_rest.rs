@@ -743,12 +743,15 @@ async fn sse_resume_mid_run_loses_no_state_event() {
 async fn guided_ddim_job_streams_losses_and_ranks_best_of_n() {
     let s = start(Opts::default()).await;
     let c = client();
+    // Repair off: the joint-motion check below needs the projection's joints, and with the
+    // untrained test weights the part removal can leave a sample without any.
     let r = submit(
         &c,
         &s.url("/v1/jobs"),
         json!({"points": points_json(64), "seed": 3, "samples": 2, "resolution": 8,
                "sampler": "ddim", "eta": 0.0, "steps": 20, "n_g": 10, "w_pc": 15.0,
-               "tau": 1000.0, "preview_every": 1, "guidance_max_step": 0.05}),
+               "tau": 1000.0, "preview_every": 1, "guidance_max_step": 0.05,
+               "repair": "off"}),
     )
     .await;
     assert_eq!(r.status(), 202);
@@ -924,6 +927,162 @@ async fn physics_refinement_steps_are_a_job_setting_counted_in_progress() {
     s.shutdown().await;
 }
 
+async fn json_artifact(
+    c: &reqwest::Client,
+    s: &support::TestServer,
+    loc: &str,
+    name: &str,
+) -> Value {
+    let r = c
+        .get(s.url(&format!("{loc}/artifacts/{name}")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200, "{name}");
+    r.json().await.unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn cameras_w_free_and_repair_reach_the_job_and_its_ranking() {
+    let s = start(Opts::default()).await;
+    let c = client();
+    // cloud(64) lies in [-0.5, 0.5] × [-0.3, 0.3] × [0.1, 0.9]: both cameras are outside it.
+    let quick = json!({"points": points_json(64), "seed": 5, "resolution": 8,
+                       "sampler": "ddim", "steps": 10, "n_g": 5, "refine_steps": 2,
+                       "guidance_max_step": 0.05});
+    // JSON, one camera as a single triple: ℓ_free at its default weight, repair on.
+    let mut body = quick.clone();
+    body["camera"] = json!([-2.0, 0.0, 0.5]);
+    let r = submit(&c, &s.url("/v1/jobs"), body).await;
+    assert_eq!(r.status(), 202);
+    let loc = r.headers()["location"].to_str().unwrap().to_string();
+    let job: Value = r.json().await.unwrap();
+    let req = &job["request"];
+    assert_eq!(req["camera"], json!([[-2.0, 0.0, 0.5]]), "{req}");
+    assert_eq!(
+        (req["w_free"].as_f64(), req["repair"].as_str()),
+        (Some(15.0), Some("on")),
+        "{req}"
+    );
+    let r = c.get(s.url(&format!("{loc}/events"))).send().await.unwrap();
+    let evs = SseReader::new(r).collect().await;
+    let done = evs.last().unwrap().json();
+    assert_eq!(done["state"], "SUCCEEDED", "{done:#}");
+    // Progress reports ℓ_free next to the other terms.
+    let losses: Vec<Value> = evs
+        .iter()
+        .filter(|e| e.event == "progress")
+        .filter_map(|e| e.json().get("guidance").cloned())
+        .collect();
+    assert!(!losses.is_empty());
+    assert!(
+        losses.iter().all(|g| g["l_free"]
+            .as_f64()
+            .is_some_and(|v| v.is_finite() && v >= 0.0)),
+        "{losses:?}"
+    );
+    let ranking = json_artifact(&c, &s, &loc, "ranking.json").await;
+    assert_eq!(ranking["guidance"]["w_free"], 15.0, "{ranking:#}");
+    assert_eq!(
+        ranking["guidance"]["cameras"],
+        json!([[-2.0, 0.0, 0.5]]),
+        "{ranking:#}"
+    );
+    assert_eq!(ranking["repair"], "on");
+    let row = &ranking["samples"][0];
+    assert!(row["repairs"].as_u64().is_some(), "{ranking:#}");
+    let removed = row["removed"].as_array().expect("removed is a list");
+    for r in removed {
+        assert!(!r["part"].as_str().unwrap().is_empty(), "{r}");
+        assert!(
+            ["empty", "free_space", "floating"].contains(&r["reason"].as_str().unwrap()),
+            "{r}"
+        );
+        assert!(!r["detail"].as_str().unwrap().is_empty(), "{r}");
+    }
+    // A raw NPY upload with the knobs in the query string: `camera` repeats (the second with
+    // its commas percent-encoded), and repair off leaves the sample as projected.
+    let npy = physnap::pointcloud::PointCloud { points: cloud(64) }
+        .to_bytes(physnap::pointcloud::Format::Npy);
+    let r = c
+        .post(s.url(
+            "/v1/jobs?camera=-2,0,0.5&camera=0%2C-2%2C0.5&w_free=3&repair=off&seed=5\
+             &resolution=8&sampler=ddim&steps=10&n_g=5&refine_steps=2&guidance_max_step=0.05",
+        ))
+        .header("content-type", "application/x-npy")
+        .body(npy.clone())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    let loc = r.headers()["location"].to_str().unwrap().to_string();
+    let job: Value = r.json().await.unwrap();
+    let req = &job["request"];
+    assert_eq!(req["point_count"], 64);
+    assert_eq!(
+        req["camera"],
+        json!([[-2.0, 0.0, 0.5], [0.0, -2.0, 0.5]]),
+        "{req}"
+    );
+    assert_eq!(
+        (req["w_free"].as_f64(), req["repair"].as_str()),
+        (Some(3.0), Some("off")),
+        "{req}"
+    );
+    let j = wait_state(&c, &s.url(&loc), &["SUCCEEDED", "FAILED"]).await;
+    assert_eq!(j["state"], "SUCCEEDED", "{j:#}");
+    let ranking = json_artifact(&c, &s, &loc, "ranking.json").await;
+    assert_eq!(ranking["guidance"]["w_free"], 3.0, "{ranking:#}");
+    assert_eq!(ranking["guidance"]["cameras"].as_array().unwrap().len(), 2);
+    assert_eq!(ranking["repair"], "off");
+    assert_eq!(ranking["samples"][0]["repairs"], 0, "{ranking:#}");
+    assert_eq!(ranking["samples"][0]["removed"], json!([]), "{ranking:#}");
+    // JSON, a list of cameras and repair off.
+    let mut body = quick.clone();
+    body["camera"] = json!([[-2.0, 0.0, 0.5]]);
+    body["repair"] = json!("off");
+    body["w_free"] = json!(0.0);
+    let r = submit(&c, &s.url("/v1/jobs"), body).await;
+    assert_eq!(r.status(), 202);
+    let job: Value = r.json().await.unwrap();
+    let req = &job["request"];
+    assert_eq!(req["camera"], json!([[-2.0, 0.0, 0.5]]), "{req}");
+    assert_eq!(
+        (req["w_free"].as_f64(), req["repair"].as_str()),
+        (Some(0.0), Some("off")),
+        "{req}"
+    );
+    // Bad cameras in the query string are named as written.
+    for (query, field, value) in [
+        ("camera=1,2", "camera", "[1, 2]"),
+        ("camera=up", "camera", "\"up\""),
+        (
+            "camera=-2,0,0.5&camera=0,nan,0.5",
+            "camera[1]",
+            "[0, NaN, 0.5]",
+        ),
+        ("camera=0,0,0.5", "camera", "[0.0, 0.0, 0.5]"),
+        ("repair=sometimes", "repair", "\"sometimes\""),
+    ] {
+        let r = c
+            .post(s.url(&format!("/v1/jobs?{query}")))
+            .header("content-type", "application/x-npy")
+            .body(npy.clone())
+            .send()
+            .await
+            .unwrap();
+        let p = problem(r, 422).await;
+        let e = &p["errors"][0];
+        assert_eq!(
+            (e["field"].as_str(), e["value"].as_str()),
+            (Some(field), Some(value)),
+            "{query}: {p}"
+        );
+        assert!(!e["limit"].as_str().unwrap().is_empty(), "{p}");
+    }
+    s.shutdown().await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn guidance_and_sampler_fields_are_validated() {
     let s = start(Opts::default()).await;
@@ -973,6 +1132,28 @@ async fn guidance_and_sampler_fields_are_validated() {
             "category_guidance_below",
             "1001",
         ),
+        // A camera inside the points' box, a triple of the wrong length, more than 16.
+        (
+            json!({"camera": [0.0, 0.0, 0.5]}),
+            "camera",
+            "[0.0, 0.0, 0.5]",
+        ),
+        (
+            json!({"camera": [[-2.0, 0.0, 0.5], [1.0, 2.0]]}),
+            "camera[1]",
+            "[1, 2]",
+        ),
+        (
+            json!({"camera": vec![[-2.0, 0.0, 0.5]; 17]}),
+            "camera",
+            "17 cameras",
+        ),
+        (
+            json!({"camera": [-2.0, 0.0, 0.5], "w_free": -1.0}),
+            "w_free",
+            "-1",
+        ),
+        (json!({"repair": "maybe"}), "repair", "\"maybe\""),
     ];
     for (extra, field, value) in cases {
         let mut b = json!({"points": points_json(32)});

@@ -103,6 +103,26 @@ pub struct SubmitArgs {
     /// keeps only its wider range); server default when unset.
     #[arg(long, env = "PHYSNAP_JOINT_MOTION", value_parser = ["screw", "dominant"])]
     joint_motion: Option<String>,
+    /// Sensor position x,y,z (object frame, metres) the scan was taken from; repeat the flag
+    /// (or separate with ';' in PHYSNAP_CAMERA) for several views. Turns on the free-space loss
+    /// and the removal of parts in space the camera saw through.
+    #[arg(
+        long = "camera",
+        env = "PHYSNAP_CAMERA",
+        value_delimiter = ';',
+        value_name = "X,Y,Z",
+        allow_hyphen_values = true
+    )]
+    cameras: Vec<String>,
+    /// Weight of the free-space loss (server default: 15 with a camera, 0 without).
+    #[arg(long, env = "PHYSNAP_W_FREE")]
+    w_free: Option<f64>,
+    /// Joint repair and part removal: on or off (server default: on).
+    #[arg(long, env = "PHYSNAP_REPAIR", value_parser = ["on", "off"])]
+    repair: Option<String>,
+    /// Scale hypothesis: auto, off or a factor (server default: auto).
+    #[arg(long, env = "PHYSNAP_SCALE")]
+    scale: Option<String>,
     /// Idempotency key (a retry with the same key returns the same job).
     #[arg(long, env = "PHYSNAP_REQUEST_ID", default_value = "")]
     request_id: String,
@@ -162,6 +182,14 @@ pub fn submit(a: SubmitArgs) -> anyhow::Result<()> {
         .iter()
         .flat_map(|p| p.iter().flat_map(|c| c.to_le_bytes()))
         .collect();
+    let camera = super::generate::parse_cameras(&a.cameras)?
+        .into_iter()
+        .map(|[x, y, z]| pb::Vec3 {
+            x: x.into(),
+            y: y.into(),
+            z: z.into(),
+        })
+        .collect();
     runtime()?.block_on(async {
         let mut cl = connect(&a.conn).await?;
         let spec = pb::JobSpec {
@@ -186,6 +214,10 @@ pub fn submit(a: SubmitArgs) -> anyhow::Result<()> {
             category_guidance: a.category_guidance,
             category_guidance_below: a.category_guidance_below,
             joint_motion: a.joint_motion.clone().unwrap_or_default(),
+            camera,
+            w_free: a.w_free,
+            repair: a.repair.clone().unwrap_or_default(),
+            scale: a.scale.clone().unwrap_or_default(),
             ..Default::default()
         };
         let job = cl

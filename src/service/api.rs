@@ -11,16 +11,17 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::runner::{Preview, Progress};
-use super::spec::{JobInput, JobSpec, PointsInput};
+use super::spec::{CameraInput, JobInput, JobSpec, PointsInput, Violation};
 use super::store::{Artifact, JobRecord};
 
 /// A job request (`POST /v1/jobs`, `application/json`). Give the point cloud in exactly one of
 /// `points`, `points_f32le_base64`, `points_ply_base64`, `points_npy_base64`.
 ///
 /// The cloud (16–100 000 finite points) guides the sampler (PhysNAP loss guidance: ℓ_pc, ℓ_pen,
-/// ℓ_mob with weights `w_pc`, `w_pen`, `w_mob` over the last `n_g` steps, temperature `tau`);
-/// with all three weights 0 the job samples unguided. Best-of-N samples are ranked by D_pc
-/// (mean point-to-mesh distance to the cloud) and the best one is exported.
+/// ℓ_mob with weights `w_pc`, `w_pen`, `w_mob` over the last `n_g` steps, temperature `tau`;
+/// with a `camera`, also the free-space loss ℓ_free at `w_free`); with every weight 0 the job
+/// samples unguided. Best-of-N samples are ranked by D_pc (mean point-to-mesh distance to the
+/// cloud) and the best one is exported.
 #[derive(Debug, Clone, Default, Deserialize, Serialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct JobRequest {
@@ -122,6 +123,83 @@ pub struct JobRequest {
     /// joints). Default `dominant`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub joint_motion: Option<String>,
+    /// Sensor position(s) the scan was taken from (object frame, metres): one `[x, y, z]` or a
+    /// list `[[x, y, z], ...]` of at most 16, each 3 finite numbers with |coordinate| <= 1000,
+    /// outside the axis-aligned box of the points. Turns on the free-space loss ℓ_free (weight
+    /// `w_free`) and, with `repair` on, the removal of parts in space the cameras saw through.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera: Option<CameraRequest>,
+    /// Free-space loss weight ℓ_free (>= 0). Default: 15 (ℓ_pc's) with a camera; 0 without one
+    /// (a weight given without a camera is ignored).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub w_free: Option<f64>,
+    /// Joint repair and part removal: `on` (default: hinges onto their part's edge or centre
+    /// line, axes snapped to box axes, children attached, parts the scan does not allow removed
+    /// (empty, in the cameras' free space, floating); listed in `object.json` and
+    /// `ranking.json`) or `off` (the raw projection).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub repair: Option<String>,
+    /// Scale hypothesis: `auto` (default: the scan is scaled so its box diagonal is the
+    /// category's typical procedural size, at most ×/÷ 4, and the result scaled back), `off`, or
+    /// a factor such as `"2.5"` (1/16–16).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale: Option<String>,
+}
+
+/// `camera` of a [`JobRequest`]: one sensor position or a list of them. Its OpenAPI schema is
+/// written out below (the derive cannot say "3 numbers").
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(untagged)]
+pub enum CameraRequest {
+    /// One sensor position `[x, y, z]`.
+    One(Vec<f64>),
+    /// Several, `[[x, y, z], ...]`.
+    Many(Vec<Vec<f64>>),
+}
+
+impl utoipa::PartialSchema for CameraRequest {
+    fn schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schema> {
+        use utoipa::openapi::schema::{
+            ArrayBuilder, KnownFormat, ObjectBuilder, OneOfBuilder, SchemaFormat, Type,
+        };
+        let triple = || {
+            ArrayBuilder::new()
+                .items(
+                    ObjectBuilder::new()
+                        .schema_type(Type::Number)
+                        .format(Some(SchemaFormat::KnownFormat(KnownFormat::Double))),
+                )
+                .min_items(Some(3))
+                .max_items(Some(3))
+        };
+        OneOfBuilder::new()
+            .item(triple().description(Some("One sensor position `[x, y, z]` (metres).")))
+            .item(
+                ArrayBuilder::new()
+                    .items(triple())
+                    .max_items(Some(super::spec::MAX_CAMERAS))
+                    .description(Some(
+                        "Several sensor positions `[[x, y, z], ...]` (metres; at most 16).",
+                    )),
+            )
+            .description(Some(
+                "Sensor position(s) of a job: one `[x, y, z]` or a list of them.",
+            ))
+            .into()
+    }
+}
+
+impl ToSchema for CameraRequest {}
+
+impl From<CameraRequest> for CameraInput {
+    fn from(c: CameraRequest) -> Self {
+        match c {
+            // `[]` is the empty list: no camera.
+            CameraRequest::One(t) if t.is_empty() => CameraInput::Many(Vec::new()),
+            CameraRequest::One(t) => CameraInput::One(t),
+            CameraRequest::Many(l) => CameraInput::Many(l),
+        }
+    }
 }
 
 /// Query parameters of a raw upload (`POST /v1/jobs` with a PLY, NPY or f32le body): the same
@@ -172,16 +250,27 @@ pub struct UploadParams {
     pub category_guidance_below: Option<u32>,
     /// Joint motions (`screw`, `dominant`).
     pub joint_motion: Option<String>,
+    /// Sensor position `x,y,z` (object frame, metres); repeat the parameter for several (at
+    /// most 16).
+    #[serde(default)]
+    #[param(style = Form, explode)]
+    pub camera: Vec<String>,
+    /// Free-space loss weight ℓ_free (default 15 with a camera, 0 without).
+    pub w_free: Option<f64>,
+    /// Joint repair and part removal (`on`, `off`).
+    pub repair: Option<String>,
+    /// Scale hypothesis (`auto`, `off` or a factor).
+    pub scale: Option<String>,
 }
 
 impl JobRequest {
     /// Into the domain input. More than one points field is reported as `points` violating
     /// "exactly one of ...".
-    pub fn into_input(self) -> Result<JobInput, super::spec::Violation> {
+    pub fn into_input(self) -> Result<JobInput, Violation> {
         let b64 = |field: &'static str, s: &str| {
             base64::engine::general_purpose::STANDARD
                 .decode(s.trim())
-                .map_err(|e| super::spec::Violation {
+                .map_err(|e| Violation {
                     field: field.into(),
                     limit: "valid base64".into(),
                     value: e.to_string(),
@@ -201,7 +290,7 @@ impl JobRequest {
             given.push(PointsInput::Npy(b64("points_npy_base64", s)?));
         }
         if given.len() > 1 {
-            return Err(super::spec::Violation {
+            return Err(Violation {
                 field: "points".into(),
                 limit: "exactly one of points, points_f32le_base64, points_ply_base64, points_npy_base64".into(),
                 value: format!("{} given", given.len()),
@@ -230,14 +319,42 @@ impl JobRequest {
             category_guidance: self.category_guidance,
             category_guidance_below: self.category_guidance_below,
             joint_motion: self.joint_motion,
+            camera: self.camera.map(CameraInput::from),
+            w_free: self.w_free,
+            repair: self.repair,
+            scale: self.scale,
         })
     }
 }
 
+/// A `camera` query value, `x,y,z`, as numbers (their count and range are checked in
+/// validation).
+fn camera_of_query(field: String, text: &str) -> Result<Vec<f64>, Violation> {
+    text.split(',')
+        .map(|c| c.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| Violation {
+            field,
+            limit: "x,y,z: 3 finite numbers (object frame, metres)".into(),
+            value: format!("{text:?}"),
+        })
+}
+
 impl UploadParams {
-    /// Into the domain input with the uploaded cloud.
-    pub fn into_input(self, points: PointsInput) -> JobInput {
-        JobInput {
+    /// Into the domain input with the uploaded cloud. One `camera` parameter is named `camera`
+    /// in errors, the j-th of several `camera[j]`.
+    pub fn into_input(self, points: PointsInput) -> Result<JobInput, Violation> {
+        let camera = match self.camera.as_slice() {
+            [] => None,
+            [one] => Some(CameraInput::One(camera_of_query("camera".into(), one)?)),
+            many => Some(CameraInput::Many(
+                many.iter()
+                    .enumerate()
+                    .map(|(j, c)| camera_of_query(format!("camera[{j}]"), c))
+                    .collect::<Result<_, _>>()?,
+            )),
+        };
+        Ok(JobInput {
             points: Some(points),
             category: self.category,
             w_pc: self.w_pc,
@@ -260,7 +377,11 @@ impl UploadParams {
             category_guidance: self.category_guidance,
             category_guidance_below: self.category_guidance_below,
             joint_motion: self.joint_motion,
-        }
+            camera,
+            w_free: self.w_free,
+            repair: self.repair,
+            scale: self.scale,
+        })
     }
 }
 
@@ -312,8 +433,26 @@ pub struct RequestView {
     pub category_guidance_below: u32,
     /// Joint motions as run: `screw` or `dominant`.
     pub joint_motion: String,
-    /// Whether guidance is applied (some weight > 0); false = plain NAP sampling.
+    /// Sensor positions as run (object frame, metres; empty: none).
+    #[serde(default)]
+    pub camera: Vec<[f32; 3]>,
+    /// Free-space loss weight as run (0 without a camera).
+    #[serde(default)]
+    pub w_free: f64,
+    /// Joint repair and part removal as run: `on` or `off`.
+    #[serde(default = "repair_off")]
+    pub repair: String,
+    /// The scale hypothesis as run (absent: none, the scan as given).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale: Option<f64>,
+    /// Whether guidance is applied (some weight > 0, ℓ_free's with a camera); false = plain NAP
+    /// sampling.
     pub guided: bool,
+}
+
+/// The repair of a job view written before repair could be chosen (stored `state` events).
+fn repair_off() -> String {
+    crate::engine::generate::RepairMode::Off.as_str().into()
 }
 
 /// A part box of a preview.
@@ -385,7 +524,10 @@ pub struct GuidanceLossesView {
     pub l_pen: f64,
     /// ℓ_mob.
     pub l_mob: f64,
-    /// w_pc ℓ_pc + w_pen ℓ_pen + w_mob ℓ_mob.
+    /// ℓ_free (0 without a camera).
+    #[serde(default)]
+    pub l_free: f64,
+    /// w_pc ℓ_pc + w_pen ℓ_pen + w_mob ℓ_mob + w_free ℓ_free.
     pub total: f64,
 }
 
@@ -532,6 +674,10 @@ pub fn request_view(s: &JobSpec) -> RequestView {
         category_guidance: s.category_guidance,
         category_guidance_below: s.category_guidance_below,
         joint_motion: s.joint_motion.as_str().to_string(),
+        camera: s.cameras.clone(),
+        w_free: s.w_free,
+        repair: s.repair.as_str().to_string(),
+        scale: s.scale,
         guided: s.guided(),
     }
 }
@@ -576,6 +722,7 @@ pub fn progress_view(p: &Progress) -> ProgressView {
             l_pc: l.pc,
             l_pen: l.pen,
             l_mob: l.mob,
+            l_free: l.free,
             total: l.total,
         }),
     }

@@ -19,7 +19,7 @@ use tonic::{Request, Response, Status};
 use super::api::{ARTIFACT_NAMES, JobView};
 use super::auth::Tenants;
 use super::jobs::{Service, ServiceError, WatchItem};
-use super::spec::{JobInput, PointsInput};
+use super::spec::{CameraInput, JobInput, PointsInput};
 
 /// Generated protobuf and tonic code for `proto/physnap/v1/jobs.proto`.
 #[allow(missing_docs, clippy::all)]
@@ -153,6 +153,12 @@ pub fn input_of(spec: pb::JobSpec) -> JobInput {
         category_guidance: spec.category_guidance,
         category_guidance_below: spec.category_guidance_below,
         joint_motion: Some(spec.joint_motion).filter(|s| !s.is_empty()),
+        // A repeated field: errors name the j-th camera `camera[j]`.
+        camera: (!spec.camera.is_empty())
+            .then(|| CameraInput::Many(spec.camera.iter().map(|c| vec![c.x, c.y, c.z]).collect())),
+        w_free: spec.w_free,
+        repair: Some(spec.repair).filter(|s| !s.is_empty()),
+        scale: Some(spec.scale).filter(|s| !s.is_empty()),
     }
 }
 

@@ -252,8 +252,7 @@ async fn submit(
 /// query string) as the domain input.
 fn parse_body(ctype: &str, query: Option<&str>, body: &[u8]) -> Result<JobInput, ServiceError> {
     let upload = |points: PointsInput| -> Result<JobInput, ServiceError> {
-        let params: UploadParams = serde_urlencoded_parse(query.unwrap_or(""))?;
-        Ok(params.into_input(points))
+        Ok(upload_params(query.unwrap_or(""))?.into_input(points)?)
     };
     match ctype {
         "application/json" => {
@@ -274,15 +273,33 @@ fn parse_body(ctype: &str, query: Option<&str>, body: &[u8]) -> Result<JobInput,
     }
 }
 
-fn serde_urlencoded_parse(q: &str) -> Result<UploadParams, ServiceError> {
+fn query_parse<T: serde::de::DeserializeOwned>(q: &str) -> Result<T, ServiceError> {
     // axum's Query extractor uses serde_urlencoded; going through `Query::try_from_uri` keeps
     // the same parser without a direct dependency.
     let uri: Uri = format!("/?{q}")
         .parse()
         .map_err(|e| ServiceError::Malformed(format!("query string: {e}")))?;
-    Query::<UploadParams>::try_from_uri(&uri)
+    Query::<T>::try_from_uri(&uri)
         .map(|q| q.0)
         .map_err(|e| ServiceError::Malformed(e.body_text()))
+}
+
+/// The knobs of a raw upload. `camera` may repeat, which serde_urlencoded does not take into a
+/// struct field: its values are collected first (in order) and the other pairs parsed as
+/// [`UploadParams`].
+fn upload_params(q: &str) -> Result<UploadParams, ServiceError> {
+    let mut cameras = Vec::new();
+    let mut rest = Vec::new();
+    // serde_urlencoded splits pairs at '&' alone, as here.
+    for pair in q.split('&').filter(|p| !p.is_empty()) {
+        match query_parse::<Vec<(String, String)>>(pair)?.as_slice() {
+            [(k, v)] if k == "camera" => cameras.push(v.clone()),
+            _ => rest.push(pair),
+        }
+    }
+    let mut params: UploadParams = query_parse(&rest.join("&"))?;
+    params.camera = cameras;
+    Ok(params)
 }
 
 /// Get a job.
@@ -567,7 +584,7 @@ async fn not_found(uri: Uri) -> ApiError {
 #[openapi(
     info(
         title = "physnap job service",
-        description = "Articulated-object generation jobs (PhysNAP). Jobs are resources: submit, watch (SSE), download. Point-cloud guidance is not applied yet: the cloud and loss weights are validated and stored, generation is unconditional on them.",
+        description = "Articulated-object generation jobs (PhysNAP). Jobs are resources: submit, watch (SSE), download. The point cloud guides the sampler (PhysNAP loss guidance, plus the free-space loss when a camera is given); the best sample is repaired and exported as GLB, URDF and object JSON.",
         license(name = "MIT OR Apache-2.0")
     ),
     paths(submit, get_job, list_jobs, cancel_job, delete_job, events, list_artifacts, get_artifact, categories),

@@ -10,15 +10,18 @@
 //! [`GuidanceOptions`] (n_g converted from "last n_g reverse steps" to the engine's "t < n_g"
 //! by [`JobSpec::guidance_threshold`]), the trained shape decoder is the part SDF the losses
 //! query, and the spec's sampler and step count pick the engine's reverse-step rule. All
-//! weights 0 samples unguided (plain NAP).
+//! weights 0 samples unguided (plain NAP). The job's cameras add ℓ_free at `w_free`; with
+//! `repair` on (the default) the engine repairs the joints and removes the parts the scan does
+//! not allow (empty, in the cameras' free space, floating).
 //!
 //! Best-of-N: each sample `i` (seed + i) runs on its own; a sample that diverges
 //! ([`EngineError::Diverged`]) is recorded and skipped, and the others are ranked by D_pc
 //! (mean point-to-mesh distance to the job's cloud, ascending; samples without a mesh last).
 //! The best is exported as `model.glb`, `robot.zip` and `object.json`; `ranking.json`
 //! (`physnap.job_ranking/v1`) lists every sample with index, seed, D_pc, O_mesh (surface
-//! buried in another part), whether it diverged (and why) and which one was exported. If
-//! every sample diverges the job fails with [`RunError::AllDiverged`].
+//! buried in another part), its joint repairs (count) and removed parts, whether it diverged
+//! (and why) and which one was exported. If every sample diverges the job fails with
+//! [`RunError::AllDiverged`].
 
 use std::ops::ControlFlow;
 use std::time::Instant;
@@ -122,7 +125,7 @@ pub struct Progress {
     pub eta_seconds: Option<f64>,
     /// x̂₀ preview, every `preview_every` steps.
     pub preview: Option<Preview>,
-    /// Loss values of this step (ℓ_pc, ℓ_pen, ℓ_mob, weighted total), guided steps only.
+    /// Loss values of this step (ℓ_pc, ℓ_pen, ℓ_mob, ℓ_free, weighted total), guided steps only.
     pub guidance: Option<GuidanceLosses>,
 }
 
@@ -146,7 +149,7 @@ pub enum RunError {
     Engine(EngineError),
     /// Every sample of the job diverged under guidance.
     #[error(
-        "all {samples} samples diverged under guidance (first: {first}); lower the guidance weights (w_pc, w_pen, w_mob), n_g, or set guidance_max_step"
+        "all {samples} samples diverged under guidance (first: {first}); lower the guidance weights (w_pc, w_pen, w_mob, w_free), n_g, or set guidance_max_step"
     )]
     AllDiverged {
         /// Samples in the job.
@@ -197,20 +200,24 @@ fn preview_of(obj: &ArticulatedObject) -> Preview {
     }
 }
 
-/// The engine's guidance of a spec (None when every weight is 0).
+/// The engine's guidance of a spec: None when no loss guides it and it has no camera (a camera
+/// alone still tells the part removal which space the scan saw through).
 pub fn guidance_of(spec: &JobSpec, schedule_steps: usize) -> Option<GuidanceOptions> {
-    spec.guided().then(|| GuidanceOptions {
-        points: spec.points.clone(),
-        w_pc: spec.w_pc,
-        w_pen: spec.w_pen,
-        w_mob: spec.w_mob,
-        cameras: Vec::new(),
-        w_free: 0.0,
-        steps: spec.guidance_threshold(schedule_steps),
-        tau: spec.tau,
-        max_step: spec.guidance_max_step,
-        refine_steps: spec.refine_steps as usize,
-        refine_physics_steps: spec.refine_physics_steps as usize,
+    (spec.guided() || !spec.cameras.is_empty()).then(|| {
+        GuidanceOptions {
+            points: spec.points.clone(),
+            w_pc: spec.w_pc,
+            w_pen: spec.w_pen,
+            w_mob: spec.w_mob,
+            cameras: Vec::new(),
+            w_free: 0.0,
+            steps: spec.guidance_threshold(schedule_steps),
+            tau: spec.tau,
+            max_step: spec.guidance_max_step,
+            refine_steps: spec.refine_steps as usize,
+            refine_physics_steps: spec.refine_physics_steps as usize,
+        }
+        .with_cameras(spec.cameras.clone(), Some(spec.w_free))
     })
 }
 
@@ -224,6 +231,10 @@ struct Ranked {
     diverged: Option<String>,
     /// Parts that took their nearest codebook shape.
     retrieved: Vec<usize>,
+    /// Joint repairs made (object.json lists the exported sample's).
+    repairs: usize,
+    /// Parts removed: `{part, reason, detail}` each.
+    removed: Vec<serde_json::Value>,
 }
 
 fn ranking_json(spec: &JobSpec, guidance: &Option<GuidanceOptions>, rows: &[Ranked]) -> Vec<u8> {
@@ -238,9 +249,10 @@ fn ranking_json(spec: &JobSpec, guidance: &Option<GuidanceOptions>, rows: &[Rank
     let doc = serde_json::json!({
         "format": "physnap.job_ranking/v1",
         "ranked_by": "d_pc (mean point-to-mesh distance to the job's cloud, m; ascending; diverged samples last)",
-        "guided": guidance.is_some(),
+        "guided": spec.guided(),
         "guidance": guidance.as_ref().map(|g| serde_json::json!({
-            "w_pc": g.w_pc, "w_pen": g.w_pen, "w_mob": g.w_mob,
+            "w_pc": g.w_pc, "w_pen": g.w_pen, "w_mob": g.w_mob, "w_free": g.w_free,
+            "cameras": g.cameras,
             "n_g": spec.n_g, "guided_below_t": g.steps, "tau": g.tau,
             "max_step": g.max_step, "refine_steps": g.refine_steps,
             "refine_physics_steps": g.refine_physics_steps,
@@ -250,6 +262,7 @@ fn ranking_json(spec: &JobSpec, guidance: &Option<GuidanceOptions>, rows: &[Rank
         "category_guidance": spec.category_guidance,
         "category_guidance_below": spec.category_guidance_below,
         "joint_motion": spec.joint_motion.as_str(),
+        "repair": spec.repair.as_str(),
         "best": best,
         "samples": rows.iter().enumerate().map(|(rank, r)| serde_json::json!({
             "rank": rank + 1,
@@ -259,6 +272,8 @@ fn ranking_json(spec: &JobSpec, guidance: &Option<GuidanceOptions>, rows: &[Rank
             "o_mesh": num(r.o_mesh),
             "diverged": r.diverged.is_some(),
             "retrieved_parts": r.retrieved,
+            "repairs": r.repairs,
+            "removed": r.removed,
             "error": r.diverged,
             "exported": Some(r.index) == best,
         })).collect::<Vec<_>>(),
@@ -294,8 +309,8 @@ pub fn run_job(
         category_guidance: spec.category_guidance,
         category_guidance_below: Some(spec.category_guidance_below as usize),
         joint_motion: spec.joint_motion,
-        repair: crate::engine::generate::RepairMode::On,
-        scale: None,
+        repair: spec.repair,
+        scale: spec.scale,
     };
     let decoder = LatentSdfDecoder::new(&m.shape_prior.decoder);
     let started = Instant::now();
@@ -405,6 +420,16 @@ pub fn run_job(
             o_mesh: mesh_overlap(&g.object, &g.meshes, MESH_OVERLAP_SAMPLES, g.seed),
             diverged: None,
             retrieved: g.retrieved.clone(),
+            repairs: g.repairs.len(),
+            removed: g
+                .removed
+                .iter()
+                .map(|r| {
+                    serde_json::json!({
+                        "part": r.part, "reason": r.reason.as_str(), "detail": r.detail,
+                    })
+                })
+                .collect(),
         })
         .collect();
     rows.extend(diverged.into_iter().map(|(index, seed, e)| Ranked {
@@ -414,6 +439,8 @@ pub fn run_job(
         o_mesh: f64::NAN,
         diverged: Some(e),
         retrieved: Vec::new(),
+        repairs: 0,
+        removed: Vec::new(),
     }));
     let ranking = ranking_json(spec, &guidance, &rows);
     let chosen = ranked.swap_remove(0).1;

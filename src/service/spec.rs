@@ -8,10 +8,11 @@
 //! `INVALID_ARGUMENT`).
 
 use crate::data::categories::category_index;
-use crate::engine::generate::{JointMotion, Retrieval};
+use crate::engine::EngineError;
+use crate::engine::generate::{JointMotion, RepairMode, Retrieval};
 use crate::engine::guidance::{
     DEFAULT_GUIDED_STEPS, DEFAULT_MAX_STEP, DEFAULT_REFINE_PHYSICS_STEPS, DEFAULT_REFINE_STEPS,
-    DEFAULT_TAU, GuidanceOptions, MAX_REFINE_STEPS, weights_active,
+    DEFAULT_TAU, DEFAULT_W_FREE, GuidanceOptions, MAX_REFINE_STEPS, weights_active,
 };
 use crate::engine::sample::Sampler;
 use crate::engine::sample::{
@@ -33,6 +34,34 @@ pub enum PointsInput {
     Ply(Vec<u8>),
     /// A NumPy `(N, 3)` float array.
     Npy(Vec<u8>),
+}
+
+/// The sensor position(s) of a request as the client wrote them, so that a rejection names
+/// `camera` for a single triple and `camera[j]` for the j-th of a list. The coordinates are
+/// not yet checked (a triple may have the wrong length).
+#[derive(Debug, Clone, PartialEq)]
+pub enum CameraInput {
+    /// One `[x, y, z]`.
+    One(Vec<f64>),
+    /// `[[x, y, z], ...]`.
+    Many(Vec<Vec<f64>>),
+}
+
+impl CameraInput {
+    /// The field name of the `j`-th camera, as the client wrote it.
+    pub fn field(&self, j: usize) -> String {
+        match self {
+            CameraInput::One(_) => "camera".into(),
+            CameraInput::Many(_) => format!("camera[{j}]"),
+        }
+    }
+
+    fn triples(&self) -> Vec<&[f64]> {
+        match self {
+            CameraInput::One(t) => vec![t.as_slice()],
+            CameraInput::Many(l) => l.iter().map(Vec::as_slice).collect(),
+        }
+    }
 }
 
 /// A job request in transport-neutral form: every optional knob is `None` when not given.
@@ -83,10 +112,28 @@ pub struct JobInput {
     pub category_guidance_below: Option<u32>,
     /// Joint motions of the result: `screw` or `dominant` (see [`JobSpec::joint_motion`]).
     pub joint_motion: Option<String>,
+    /// Sensor position(s) the scan was taken from (object frame, metres).
+    pub camera: Option<CameraInput>,
+    /// Weight of the free-space loss ℓ_free (default [`DEFAULT_W_FREE`] with a camera, 0
+    /// without).
+    pub w_free: Option<f64>,
+    /// Joint repair and part removal: `on` (default) or `off`.
+    pub repair: Option<String>,
+    /// Scale hypothesis: `auto` (default: the scan is scaled so its box diagonal is the
+    /// category's typical procedural size, at most ×/÷ 4, and the result scaled back), `off`, or
+    /// a factor such as `"2.5"` (1/16–16).
+    pub scale: Option<String>,
 }
+
+/// Most cameras of a job (the engine's limit).
+pub use crate::engine::free_space::MAX_CAMERAS;
 
 /// The joint motion of a job that names none.
 pub const DEFAULT_JOINT_MOTION: JointMotion = JointMotion::Dominant;
+
+/// The repair mode of a job that names none (the product default, as `physnap generate`'s; the
+/// engine's own default is off).
+pub const DEFAULT_REPAIR: RepairMode = RepairMode::On;
 
 /// NAP's DDPM (strided ancestral sampling when fewer steps than the schedule are asked for).
 pub const SAMPLER_DDPM: &str = "ddpm";
@@ -145,7 +192,8 @@ pub struct ModelCaps {
 /// A validated job. Invariants: 16..=100k finite points (per [`Limits`]), a known category for
 /// a conditional model, finite non-negative weights, `sampler` `ddpm` or `ddim` (η ∈ [0, 1],
 /// 0 for `ddpm`), `steps` in 1..=schedule, `n_g ≤ steps`, τ finite and > 0, 1..=max samples, a
-/// positive finite deadline.
+/// positive finite deadline, at most 16 finite cameras outside the points' box (`w_free` 0
+/// without one), and guidance the engine accepts ([`GuidanceOptions::validate`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct JobSpec {
     /// The point cloud (object frame, metres).
@@ -194,15 +242,33 @@ pub struct JobSpec {
     /// `Screw` (NAP: each joint keeps its rotation and translation ranges) or `Dominant` (each
     /// joint keeps only the wider one, so exported joints are plain revolute / prismatic).
     pub joint_motion: JointMotion,
+    /// Sensor positions (object frame, metres) the scan was taken from; empty: unknown. They
+    /// give ℓ_free (with `w_free` > 0) and, with `repair` on, the removal of parts in space the
+    /// cameras saw through.
+    pub cameras: Vec<[f32; 3]>,
+    /// Weight of ℓ_free (0 without cameras).
+    pub w_free: f64,
+    /// Joint repair and removal of parts the scan does not allow, after sampling.
+    pub repair: RepairMode,
+    /// The resolved scale hypothesis (None: the scan as given); `auto` is resolved at
+    /// submission, so a stored job keeps the factor it was accepted with.
+    pub scale: Option<f64>,
 }
 
 /// Largest τ accepted (the engine's limit).
 pub const MAX_TAU: f64 = 1e9;
 
 impl JobSpec {
-    /// Whether any guidance weight is positive (otherwise the job samples unguided).
+    /// Whether any guidance weight is positive (ℓ_free's only with a camera; otherwise the job
+    /// samples unguided).
     pub fn guided(&self) -> bool {
-        weights_active(self.w_pc, self.w_pen, self.w_mob)
+        loss_guided(
+            self.w_pc,
+            self.w_pen,
+            self.w_mob,
+            self.w_free,
+            &self.cameras,
+        )
     }
 
     /// n_g in the engine's form: guidance applies for diffusion time t < this. The reverse
@@ -258,6 +324,55 @@ fn cloud_violation(e: PointCloudError, limits: &Limits) -> Violation {
         }
         other => violation("points", "a well-formed point cloud", other.to_string()),
     }
+}
+
+/// Whether a job's losses guide it: one of ℓ_pc, ℓ_pen, ℓ_mob on, or ℓ_free with a camera (the
+/// rule of [`GuidanceOptions::is_active`]; a job always has points).
+fn loss_guided(w_pc: f64, w_pen: f64, w_mob: f64, w_free: f64, cameras: &[[f32; 3]]) -> bool {
+    weights_active(w_pc, w_pen, w_mob) || (w_free > 0.0 && !cameras.is_empty())
+}
+
+/// Renders numbers as the client wrote them: `[1, 2.5]`.
+fn list(v: &[f64]) -> String {
+    let items: Vec<String> = v.iter().map(f64::to_string).collect();
+    format!("[{}]", items.join(", "))
+}
+
+/// The cameras' shape: each 3 finite numbers. The engine checks the rest (count, range, outside
+/// the points' box) on the job's guidance, see [`engine_violation`].
+fn parse_cameras(c: &CameraInput) -> Result<Vec<[f32; 3]>, Violation> {
+    c.triples()
+        .into_iter()
+        .enumerate()
+        .map(|(j, t)| match t {
+            [x, y, z] if t.iter().all(|v| v.is_finite()) => Ok([*x as f32, *y as f32, *z as f32]),
+            _ => Err(violation(
+                c.field(j),
+                "3 finite numbers [x, y, z] (object frame, metres)",
+                list(t),
+            )),
+        })
+        .collect()
+}
+
+/// A rejection of [`GuidanceOptions::validate`] with the field named as the client wrote it
+/// (`guidance.cameras[1]` → `camera[1]`, or `camera` for a single triple; `guidance.w_pc` →
+/// `w_pc`).
+fn engine_violation(e: EngineError, camera: Option<&CameraInput>) -> Violation {
+    let EngineError::Invalid(inv) = e else {
+        return violation("guidance", "options the engine accepts", e.to_string());
+    };
+    let field = inv.field.strip_prefix("guidance.").unwrap_or(&inv.field);
+    let field = match field {
+        "max_step" => "guidance_max_step".to_string(),
+        "steps" => "n_g".to_string(),
+        f => match (f.strip_prefix("cameras"), camera) {
+            (None, _) => f.to_string(),
+            (Some(index), Some(CameraInput::Many(_))) => format!("camera{index}"),
+            (Some(_), _) => "camera".to_string(),
+        },
+    };
+    violation(field, inv.limit, inv.value)
 }
 
 fn weight(field: &str, v: f64, limits: &Limits) -> Result<f64, Violation> {
@@ -383,6 +498,56 @@ pub fn validate(
     let w_pc = weight("w_pc", w_pc, limits)?;
     let w_pen = weight("w_pen", w_pen, limits)?;
     let w_mob = weight("w_mob", w_mob, limits)?;
+    let cameras = match &input.camera {
+        None => Vec::new(),
+        Some(c) => parse_cameras(c)?,
+    };
+    // ℓ_free's weight: as given (checked like the others), the default with a camera, and 0
+    // without one (the rule of `GuidanceOptions::with_cameras`, as `physnap generate`).
+    let w_free = input
+        .w_free
+        .map(|w| weight("w_free", w, limits))
+        .transpose()?;
+    let w_free = match (cameras.is_empty(), w_free) {
+        (true, _) => 0.0,
+        (false, Some(w)) => w,
+        (false, None) => DEFAULT_W_FREE,
+    };
+    let guided = loss_guided(w_pc, w_pen, w_mob, w_free, &cameras);
+    let repair = match input.repair.as_deref().filter(|r| !r.is_empty()) {
+        None => DEFAULT_REPAIR,
+        Some(r) => RepairMode::parse(r)
+            .ok_or_else(|| violation("repair", "\"on\" or \"off\"", format!("{r:?}")))?,
+    };
+    let scale = match input
+        .scale
+        .as_deref()
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+    {
+        None | Some("auto") => crate::engine::generate::auto_scale(
+            &points,
+            category
+                .as_ref()
+                .and_then(|c| crate::data::synth::typical_diagonal(&c.1)),
+        ),
+        Some("off") => None,
+        Some(v) => {
+            let [lo, hi] = crate::engine::generate::SCALE_RANGE;
+            let s: f64 = v
+                .parse()
+                .ok()
+                .filter(|s: &f64| s.is_finite() && (lo..=hi).contains(s))
+                .ok_or_else(|| {
+                    violation(
+                        "scale",
+                        &format!("\"auto\", \"off\" or a number in [{lo}, {hi}]"),
+                        format!("{v:?}"),
+                    )
+                })?;
+            Some(s)
+        }
+    };
     let sampler = input
         .sampler
         .clone()
@@ -594,12 +759,10 @@ pub fn validate(
             ));
         }
         (_, None) => 0.0,
-        (requested, Some(_)) => category_guidance(requested, weights_active(w_pc, w_pen, w_mob)),
+        (requested, Some(_)) => category_guidance(requested, guided),
     };
-    let category_guidance_below = category_guidance_below(
-        input.category_guidance_below.map(|b| b as usize),
-        weights_active(w_pc, w_pen, w_mob),
-    );
+    let category_guidance_below =
+        category_guidance_below(input.category_guidance_below.map(|b| b as usize), guided);
     if !(1..=NUM_STEPS).contains(&category_guidance_below) {
         return Err(violation(
             "category_guidance_below",
@@ -607,7 +770,7 @@ pub fn validate(
             category_guidance_below,
         ));
     }
-    Ok(JobSpec {
+    let spec = JobSpec {
         points,
         category,
         w_pc,
@@ -630,7 +793,18 @@ pub fn validate(
         // In [1, NUM_STEPS], checked above.
         category_guidance_below: category_guidance_below as u32,
         joint_motion,
-    })
+        cameras,
+        w_free,
+        repair,
+        scale,
+    };
+    // The engine's own checks of the guidance the job will run with (the cameras' count,
+    // range and place outside the points' box among them), at submission rather than at run.
+    if let Some(g) = super::runner::guidance_of(&spec, caps.schedule_steps as usize) {
+        g.validate(caps.schedule_steps as usize)
+            .map_err(|e| engine_violation(e, input.camera.as_ref()))?;
+    }
+    Ok(spec)
 }
 
 #[cfg(test)]

@@ -16,7 +16,7 @@ use rusqlite::{Connection, OptionalExtension, params};
 use serde::{Deserialize, Serialize};
 
 use super::spec::JobSpec;
-use crate::engine::generate::{JointMotion, Retrieval};
+use crate::engine::generate::{JointMotion, RepairMode, Retrieval};
 use crate::engine::sample::Sampler;
 
 /// Errors of the store layer.
@@ -191,6 +191,22 @@ struct SpecDoc {
     /// Rows written before joint motions could be chosen kept NAP's screws.
     #[serde(default = "joint_motion_screw")]
     joint_motion: String,
+    /// Rows written before cameras could be given had none.
+    #[serde(default)]
+    cameras: Vec<[f32; 3]>,
+    /// ... and so no ℓ_free.
+    #[serde(default)]
+    w_free: f64,
+    /// Rows written before repair could be chosen were accepted by a pipeline without it.
+    #[serde(default = "repair_off")]
+    repair: String,
+    /// ... and without a scale hypothesis.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    scale: Option<f64>,
+}
+
+fn repair_off() -> String {
+    RepairMode::Off.as_str().into()
 }
 
 fn joint_motion_screw() -> String {
@@ -228,6 +244,10 @@ fn spec_to_row(s: &JobSpec) -> (String, Vec<u8>) {
         category_guidance: s.category_guidance,
         category_guidance_below: s.category_guidance_below,
         joint_motion: s.joint_motion.as_str().to_string(),
+        cameras: s.cameras.clone(),
+        w_free: s.w_free,
+        repair: s.repair.as_str().to_string(),
+        scale: s.scale,
     };
     let mut blob = Vec::with_capacity(s.points.len() * 12);
     for p in &s.points {
@@ -258,6 +278,8 @@ fn spec_from_row(id: &str, json: &str, blob: &[u8]) -> Result<JobSpec, StoreErro
         .ok_or_else(|| corrupt(format!("unknown retrieval {:?}", d.retrieval)))?;
     let joint_motion = JointMotion::parse(&d.joint_motion)
         .ok_or_else(|| corrupt(format!("unknown joint motion {:?}", d.joint_motion)))?;
+    let repair = RepairMode::parse(&d.repair)
+        .ok_or_else(|| corrupt(format!("unknown repair mode {:?}", d.repair)))?;
     Ok(JobSpec {
         points: blob
             .chunks_exact(12)
@@ -283,6 +305,10 @@ fn spec_from_row(id: &str, json: &str, blob: &[u8]) -> Result<JobSpec, StoreErro
         category_guidance: d.category_guidance,
         category_guidance_below: d.category_guidance_below,
         joint_motion,
+        cameras: d.cameras,
+        w_free: d.w_free,
+        repair,
+        scale: d.scale,
     })
 }
 
@@ -593,5 +619,34 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(corrupt.contains("5 bytes"), "{corrupt}");
+    }
+
+    #[test]
+    fn rows_stored_before_cameras_and_repair_load_without_them() {
+        // A spec row as the service wrote it before cameras, w_free and repair: it was accepted
+        // by a pipeline without repair or ℓ_free, and loads as such.
+        let json = r#"{"category":null,"w_pc":15.0,"w_pen":2.0,"w_mob":2.0,"n_g":100,
+            "tau":1000.0,"guidance_max_step":0.02,"refine_steps":30,"refine_physics_steps":0,
+            "sampler":"ddim","eta":0.0,"steps":200,"seed":3,"samples":1,
+            "deadline_seconds":3600.0,"preview_every":0,"resolution":32,"retrieval":"empty",
+            "category_guidance":0.0,"category_guidance_below":1000,"joint_motion":"dominant"}"#;
+        let spec = spec_from_row("j", json, &[0u8; 24]).unwrap();
+        assert_eq!(spec.repair, RepairMode::Off);
+        assert!(spec.cameras.is_empty());
+        assert_eq!(spec.w_free, 0.0);
+        assert_eq!(spec.joint_motion, JointMotion::Dominant);
+        // The new fields round-trip exactly (f32 cameras through JSON included).
+        let with = JobSpec {
+            cameras: vec![[0.1, -2.5, 1.0e-3], [3.0, 0.0, 0.7]],
+            w_free: 15.0,
+            repair: RepairMode::On,
+            ..spec
+        };
+        let (json, blob) = spec_to_row(&with);
+        assert_eq!(spec_from_row("j", &json, &blob).unwrap(), with);
+        let bad = json.replace(r#""repair":"on""#, r#""repair":"maybe""#);
+        assert_ne!(bad, json);
+        let e = spec_from_row("j", &bad, &blob).unwrap_err().to_string();
+        assert!(e.contains("unknown repair mode \"maybe\""), "{e}");
     }
 }

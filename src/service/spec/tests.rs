@@ -360,3 +360,172 @@ fn each_limit_names_field_limit_and_value() {
     assert_eq!(v.field, "points");
     assert!(v.value.contains("PLY"), "{v}");
 }
+
+#[test]
+fn cameras_come_as_one_triple_or_a_list_and_set_w_free_and_repair_defaults() {
+    // cloud(16) spans [0, 15] × [0, 0] × [1, 1]: [0, -3, 1] is outside its box.
+    let l = Limits::default();
+    let run = |camera: Option<CameraInput>, w_free: Option<f64>, repair: Option<&str>| {
+        let input = JobInput {
+            points: Some(cloud(16)),
+            camera,
+            w_free,
+            repair: repair.map(str::to_string),
+            ..Default::default()
+        };
+        validate(&input, &caps(), &l, 0).unwrap()
+    };
+    let s = run(None, None, None);
+    assert!(s.cameras.is_empty());
+    assert_eq!((s.w_free, s.repair), (0.0, RepairMode::On));
+    let s = run(Some(CameraInput::One(vec![0.0, -3.0, 1.0])), None, None);
+    assert_eq!(s.cameras, vec![[0.0, -3.0, 1.0]]);
+    assert_eq!((s.w_free, DEFAULT_W_FREE), (15.0, 15.0));
+    let two = CameraInput::Many(vec![vec![0.0, -3.0, 1.0], vec![20.0, 0.5, 2.0]]);
+    let s = run(Some(two), Some(4.0), Some("off"));
+    assert_eq!(s.cameras, vec![[0.0, -3.0, 1.0], [20.0, 0.5, 2.0]]);
+    assert_eq!((s.w_free, s.repair), (4.0, RepairMode::Off));
+    // The engine runs what the spec says.
+    let g = crate::service::runner::guidance_of(&s, 1000).unwrap();
+    assert_eq!((g.cameras.clone(), g.w_free), (s.cameras.clone(), 4.0));
+    assert!(g.free_active());
+    // Without a camera ℓ_free has nothing to look from: a given weight runs as 0, as with
+    // `physnap generate --w-free`. An empty list is no camera.
+    assert_eq!(run(None, Some(4.0), None).w_free, 0.0);
+    let s = run(Some(CameraInput::Many(Vec::new())), None, Some(""));
+    assert_eq!(
+        (s.cameras.len(), s.w_free, s.repair),
+        (0, 0.0, RepairMode::On)
+    );
+    // ℓ_free alone guides a job: it counts as scan-guided (no category guidance by default),
+    // and a camera with every weight 0 still reaches the engine for the part removal.
+    let free_only = |w_free: f64| JobInput {
+        points: Some(cloud(16)),
+        category: Some("Door".into()),
+        w_pc: Some(0.0),
+        w_pen: Some(0.0),
+        w_mob: Some(0.0),
+        camera: Some(CameraInput::One(vec![0.0, -3.0, 1.0])),
+        w_free: Some(w_free),
+        ..Default::default()
+    };
+    let s = validate(&free_only(15.0), &caps(), &l, 0).unwrap();
+    assert!(s.guided());
+    assert_eq!(
+        (s.category_guidance, s.category_guidance_below),
+        (0.0, 1000)
+    );
+    let s = validate(&free_only(0.0), &caps(), &l, 0).unwrap();
+    assert!(!s.guided());
+    assert_eq!(s.category_guidance, 2.0);
+    let g = crate::service::runner::guidance_of(&s, 1000).unwrap();
+    assert!(!g.is_active());
+    assert_eq!(g.cameras, s.cameras);
+}
+
+#[test]
+fn camera_w_free_and_repair_rejections_name_field_limit_and_value() {
+    let l = Limits::default();
+    let bad = |f: &dyn Fn(&mut JobInput)| {
+        let mut i = JobInput {
+            points: Some(cloud(16)),
+            ..Default::default()
+        };
+        f(&mut i);
+        validate(&i, &caps(), &l, 0).unwrap_err()
+    };
+    let one = |c: [f64; 3]| Some(CameraInput::One(c.to_vec()));
+    let many = |cs: &[[f64; 3]]| Some(CameraInput::Many(cs.iter().map(|c| c.to_vec()).collect()));
+    let shape = "3 finite numbers [x, y, z] (object frame, metres)";
+    let v = bad(&|i| i.camera = Some(CameraInput::One(vec![1.0, 2.0])));
+    assert_eq!(
+        (v.field.as_str(), v.limit.as_str(), v.value.as_str()),
+        ("camera", shape, "[1, 2]")
+    );
+    let v = bad(&|i| i.camera = many(&[[0.0, -3.0, 1.0], [1.0, f64::NAN, 2.5]]));
+    assert_eq!(
+        (v.field.as_str(), v.limit.as_str(), v.value.as_str()),
+        ("camera[1]", shape, "[1, NaN, 2.5]")
+    );
+    // Inside the points' box (the engine's rule), as one triple and as a list's second.
+    let v = bad(&|i| i.camera = one([5.0, 0.0, 1.0]));
+    assert_eq!(
+        (v.field.as_str(), v.value.as_str()),
+        ("camera", "[5.0, 0.0, 1.0]")
+    );
+    assert!(
+        v.limit
+            .starts_with("outside the points' box [0.000, 15.000]"),
+        "{v}"
+    );
+    let v = bad(&|i| i.camera = many(&[[0.0, -3.0, 1.0], [5.0, 0.0, 1.0]]));
+    assert_eq!(v.field, "camera[1]");
+    assert!(v.limit.contains("outside the points' box"), "{v}");
+    let v = bad(&|i| i.camera = one([2000.0, 0.0, 0.0]));
+    assert_eq!(
+        (v.field.as_str(), v.limit.as_str(), v.value.as_str()),
+        (
+            "camera",
+            "finite, |coordinate| ≤ 1000",
+            "[2000.0, 0.0, 0.0]"
+        )
+    );
+    let seventeen: Vec<[f64; 3]> = (0..17).map(|k| [k as f64, -3.0, 1.0]).collect();
+    let v = bad(&|i| i.camera = many(&seventeen));
+    assert_eq!(
+        (v.field.as_str(), v.limit.as_str(), v.value.as_str()),
+        ("camera", "at most 16 cameras", "17 cameras")
+    );
+    for (w, shown) in [(-1.0, "-1"), (f64::NAN, "NaN"), (2.0e6, "2000000")] {
+        let v = bad(&|i| {
+            i.camera = one([0.0, -3.0, 1.0]);
+            i.w_free = Some(w);
+        });
+        assert_eq!((v.field.as_str(), v.value.as_str()), ("w_free", shown));
+        assert_eq!(v.limit, "finite, >= 0 and <= 1000000", "{v}");
+    }
+    // A bad weight is refused with or without a camera.
+    let v = bad(&|i| i.w_free = Some(-2.0));
+    assert_eq!((v.field.as_str(), v.value.as_str()), ("w_free", "-2"));
+    let v = bad(&|i| i.repair = Some("maybe".into()));
+    assert_eq!(
+        (v.field.as_str(), v.limit.as_str(), v.value.as_str()),
+        ("repair", "\"on\" or \"off\"", "\"maybe\"")
+    );
+}
+
+#[test]
+fn scale_defaults_to_auto_for_a_known_category_and_is_resolved_at_submission() {
+    // A 0.3 m scan of a door (the generator's doors are about 2 m): auto scales it up, capped
+    // at 4; without a category there is no typical size and no scale.
+    let small = PointsInput::Triples(
+        (0..16)
+            .map(|i| [0.0, 0.02 * i as f64, 0.1 + 0.01 * i as f64])
+            .collect(),
+    );
+    let run = |cat: Option<&str>, scale: Option<&str>| {
+        validate(
+            &JobInput {
+                points: Some(small.clone()),
+                category: cat.map(str::to_string),
+                scale: scale.map(str::to_string),
+                ..Default::default()
+            },
+            &caps(),
+            &Limits::default(),
+            1,
+        )
+    };
+    assert_eq!(run(Some("Door"), None).unwrap().scale, Some(4.0));
+    assert_eq!(run(Some("Door"), Some("auto")).unwrap().scale, Some(4.0));
+    assert_eq!(run(None, None).unwrap().scale, None);
+    assert_eq!(run(Some("Door"), Some("off")).unwrap().scale, None);
+    assert_eq!(run(Some("Door"), Some("2.5")).unwrap().scale, Some(2.5));
+    for bad in ["big", "0", "NaN", "20"] {
+        let e = run(Some("Door"), Some(bad)).unwrap_err().to_string();
+        assert!(
+            e.contains("scale") && e.contains("[0.0625, 16]") && e.contains(bad),
+            "{e}"
+        );
+    }
+}

@@ -13,6 +13,16 @@ use crate::shape::{Axis, PartShape, Primitive};
 /// The example cabinet JSON (`examples/cabinet.json`).
 pub const CABINET_JSON: &str = include_str!("../examples/cabinet.json");
 
+/// A part with a plain box shape centred at `c` with half-extents `h` (tests and examples).
+pub fn box_part(name: &str, c: [f64; 3], h: [f64; 3]) -> Part {
+    Part {
+        name: name.into(),
+        half_extents: Vector3::from(h),
+        center: Vector3::from(c),
+        shape: PartShape::Box,
+    }
+}
+
 /// The example cabinet: body, a revolute door and a prismatic drawer.
 pub fn cabinet() -> ArticulatedObject {
     // The file is part of the crate and covered by tests; failing to parse it is a build bug.

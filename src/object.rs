@@ -274,6 +274,22 @@ impl ArticulatedObject {
         self.joints.iter().map(|j| j.state_at(f)).collect()
     }
 
+    /// The diagonal of the union of the parts' boxes at rest (NaN without parts): the object's
+    /// size in every relative tolerance (repair, pruning, ranking, the real-scan metrics).
+    pub fn box_diagonal(&self) -> f64 {
+        let mut lo = Vector3::repeat(f64::INFINITY);
+        let mut hi = Vector3::repeat(f64::NEG_INFINITY);
+        for p in &self.parts {
+            lo = lo.inf(&(p.center - p.half_extents));
+            hi = hi.sup(&(p.center + p.half_extents));
+        }
+        if self.parts.is_empty() {
+            f64::NAN
+        } else {
+            (hi - lo).norm()
+        }
+    }
+
     /// The same object uniformly scaled by `f` > 0 about the origin: boxes, centres, joint
     /// origins, slide ranges and primitive shapes (latent shapes live in the box's normalised
     /// frame and need nothing; angles are unchanged).

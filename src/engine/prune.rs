@@ -129,7 +129,7 @@ pub fn prune(
     meshes: &mut Vec<TriMesh>,
     free: Option<&FreeSpace>,
 ) -> Vec<Removed> {
-    let touch = (TOUCH_FRACTION * crate::graph::repair::diagonal(obj)) as f32;
+    let touch = (TOUCH_FRACTION * obj.box_diagonal()) as f32;
     let mut out = Vec::new();
     loop {
         if obj.parts.len() <= 1 || meshes.len() != obj.parts.len() {
@@ -176,18 +176,10 @@ pub fn prune(
 mod tests {
     use super::*;
     use crate::mesh::primitives;
-    use crate::object::{Joint, JointKind, Part};
-    use crate::shape::PartShape;
+    use crate::object::{Joint, JointKind};
     use nalgebra::{Point3, Vector3};
 
-    fn part(name: &str, c: [f64; 3], h: [f64; 3]) -> Part {
-        Part {
-            name: name.into(),
-            half_extents: Vector3::from(h),
-            center: Vector3::from(c),
-            shape: PartShape::Box,
-        }
-    }
+    use crate::fixtures::box_part as part;
 
     fn joint(child: usize) -> Joint {
         Joint {

@@ -130,7 +130,7 @@ pub fn rank_terms(
         scan_diagonal: extent(points) as f64,
         free: free_share(meshes, &free),
         attach: attach_gap(obj, meshes),
-        object_diagonal: crate::graph::repair::diagonal(obj),
+        object_diagonal: obj.box_diagonal(),
         o_mesh,
     }
 }

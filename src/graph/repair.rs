@@ -69,21 +69,6 @@ pub struct Repair {
     pub detail: String,
 }
 
-/// The diagonal of the union of the parts' boxes at rest.
-pub fn diagonal(obj: &ArticulatedObject) -> f64 {
-    let mut lo = Vector3::repeat(f64::INFINITY);
-    let mut hi = Vector3::repeat(f64::NEG_INFINITY);
-    for p in &obj.parts {
-        lo = lo.inf(&(p.center - p.half_extents));
-        hi = hi.sup(&(p.center + p.half_extents));
-    }
-    if obj.parts.is_empty() {
-        0.0
-    } else {
-        (hi - lo).norm()
-    }
-}
-
 /// The translation that makes box `child` touch box `parent` (zero where they already
 /// overlap along an axis), per axis.
 fn closing_shift(obj: &ArticulatedObject, parent: usize, child: usize) -> Vector3<f64> {
@@ -122,7 +107,7 @@ fn fmt(v: &Vector3<f64>) -> String {
 /// applied.
 pub fn repair(obj: &mut ArticulatedObject) -> Vec<Repair> {
     let mut out = Vec::new();
-    let tol = ATTACH_GAP_FRACTION * diagonal(obj);
+    let tol = ATTACH_GAP_FRACTION * obj.box_diagonal();
     for ji in obj.joints_topological() {
         let (parent, child) = (obj.joints[ji].parent, obj.joints[ji].child);
         let name = obj.parts[child].name.clone();

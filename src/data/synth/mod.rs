@@ -75,7 +75,7 @@ pub fn typical_diagonal(category: &str) -> Option<f64> {
     let mut rng = Rng::new(0x007e_512e);
     let mut d: Vec<f64> = (0..TYPICAL_DRAWS)
         .filter_map(|_| generate(category, &mut rng).ok())
-        .map(|o| crate::graph::repair::diagonal(&o.object))
+        .map(|o| o.object.box_diagonal())
         .filter(|d| d.is_finite() && *d > 0.0)
         .collect();
     if d.is_empty() {

@@ -758,8 +758,13 @@ fn free_loss(
     cam: [f32; 3],
     dev: &burn::tensor::Device,
 ) -> Option<Tensor<1>> {
-    let field = BoxField { latent: LATENT };
     let (n, e) = tensors(g, dev);
+    free_loss_of(n, e, pts, cam)
+}
+
+/// ℓ_free of nodes and edges on any device, seen from `cam`.
+fn free_loss_of(n: Tensor<2>, e: Tensor<2>, pts: &[[f32; 3]], cam: [f32; 3]) -> Option<Tensor<1>> {
+    let field = BoxField { latent: LATENT };
     let d = decode(n, e, LATENT);
     let fs = crate::engine::free_space::FreeSpace::new(pts, &[cam]);
     free::loss(
@@ -794,18 +799,7 @@ fn free_space_loss_carves_a_part_between_the_camera_and_the_points() {
     for _ in 0..40 {
         let (n, e) = tensors(&g, &dev);
         let n = n.require_grad();
-        let d = decode(n.clone(), e, LATENT);
-        let fs = crate::engine::free_space::FreeSpace::new(&pts, &[cam]);
-        let field = BoxField { latent: LATENT };
-        let Some(l) = free::loss(
-            &field,
-            &d.parts,
-            d.exist.clone(),
-            &d.host,
-            &fs.samples(),
-            pts.len(),
-            0.5 * fs.margin(),
-        ) else {
+        let Some(l) = free_loss_of(n.clone(), e, &pts, cam) else {
             break;
         };
         let grads = l.backward();

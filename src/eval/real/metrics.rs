@@ -87,20 +87,6 @@ pub fn hinge_point(gt: &ArticulatedObject, j: usize) -> Point3<f64> {
     joint.origin + a * (c - joint.origin).dot(&a)
 }
 
-/// Diagonal of the union of the parts' boxes at rest.
-pub fn box_diagonal(obj: &ArticulatedObject) -> f64 {
-    let mut lo = Vector3::repeat(f64::INFINITY);
-    let mut hi = Vector3::repeat(f64::NEG_INFINITY);
-    for p in &obj.parts {
-        lo = lo.inf(&(p.center - p.half_extents));
-        hi = hi.sup(&(p.center + p.half_extents));
-    }
-    if obj.parts.is_empty() {
-        return f64::NAN;
-    }
-    (hi - lo).norm()
-}
-
 /// One GT movable joint against the generated object.
 #[derive(Debug, Clone, PartialEq)]
 pub struct JointMatch {
@@ -130,7 +116,7 @@ impl JointMatch {
 
 /// Axis and pivot errors of every GT movable joint (GT order).
 pub fn match_joints(gt: &ArticulatedObject, out: &ArticulatedObject) -> Vec<JointMatch> {
-    let diag = box_diagonal(gt);
+    let diag = gt.box_diagonal();
     gt.joints
         .iter()
         .enumerate()
@@ -217,7 +203,7 @@ pub fn chamfer_diag(
 ) -> f64 {
     let a = surface_points(out_meshes, CHAMFER_POINTS, &mut Rng::fork(seed, 1));
     let b = surface_points(gt_meshes, CHAMFER_POINTS, &mut Rng::fork(seed, 2));
-    chamfer(&a, &b) / box_diagonal(gt)
+    chamfer(&a, &b) / gt.box_diagonal()
 }
 
 /// The geometric and kinematic metrics of one generated object (sim-clean and seconds are
@@ -271,17 +257,9 @@ pub fn object_metrics(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::object::{Joint, Part};
-    use crate::shape::PartShape;
+    use crate::object::Joint;
 
-    fn part(name: &str, c: [f64; 3], h: [f64; 3]) -> Part {
-        Part {
-            name: name.into(),
-            half_extents: Vector3::from(h),
-            center: Vector3::from(c),
-            shape: PartShape::Box,
-        }
-    }
+    use crate::fixtures::box_part as part;
 
     fn joint(child: usize, kind: JointKind, axis: Vector3<f64>, origin: [f64; 3]) -> Joint {
         let (revolute, prismatic) = match kind {
@@ -357,7 +335,7 @@ mod tests {
     #[test]
     fn pivot_line_at_four_hundredths_of_the_diagonal_counts_and_six_does_not() {
         let gt = cabinet();
-        let diag = box_diagonal(&gt);
+        let diag = gt.box_diagonal();
         assert!((diag - (1.02f64.powi(2) + 2.0).sqrt()).abs() < 1e-12);
         // The hinge point: on the GT axis at the door centre's height.
         let h = hinge_point(&gt, 0);

@@ -1,17 +1,9 @@
 use nalgebra::{Point3, Vector3};
 
 use super::*;
-use crate::object::{Joint, Part};
-use crate::shape::PartShape;
+use crate::object::Joint;
 
-fn part(name: &str, c: [f64; 3], h: [f64; 3]) -> Part {
-    Part {
-        name: name.into(),
-        half_extents: Vector3::from(h),
-        center: Vector3::from(c),
-        shape: PartShape::Box,
-    }
-}
+use crate::fixtures::box_part as part;
 
 /// A 0.6 × 0.8 × 1.0 m body with one child at `child` (centre, half-extents) on a joint of
 /// `kind` about `axis` through `origin`.

@@ -541,7 +541,7 @@ pub fn validate(
                 .ok_or_else(|| {
                     violation(
                         "scale",
-                        &format!("\"auto\", \"off\" or a number in [{lo}, {hi}]"),
+                        format!("\"auto\", \"off\" or a number in [{lo}, {hi}]"),
                         format!("{v:?}"),
                     )
                 })?;

@@ -116,7 +116,11 @@ pub(crate) fn scale_of(
         "off" => Ok(None),
         "auto" => Ok(auto_scale(
             points,
-            category.and_then(physnap::data::synth::typical_diagonal),
+            Some(
+                category
+                    .and_then(physnap::data::synth::typical_diagonal)
+                    .unwrap_or_else(physnap::data::synth::typical_diagonal_any),
+            ),
         )),
         v => {
             let s: f64 = v

@@ -527,9 +527,12 @@ pub fn validate(
     {
         None | Some("auto") => crate::engine::generate::auto_scale(
             &points,
-            category
-                .as_ref()
-                .and_then(|c| crate::data::synth::typical_diagonal(&c.1)),
+            Some(
+                category
+                    .as_ref()
+                    .and_then(|c| crate::data::synth::typical_diagonal(&c.1))
+                    .unwrap_or_else(crate::data::synth::typical_diagonal_any),
+            ),
         ),
         Some("off") => None,
         Some(v) => {

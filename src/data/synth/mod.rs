@@ -72,12 +72,26 @@ const TYPICAL_DRAWS: usize = 64;
 /// prior trained on them draws — from [`TYPICAL_DRAWS`] draws of a fixed seed; None for a
 /// category the generator does not make.
 pub fn typical_diagonal(category: &str) -> Option<f64> {
-    let mut rng = Rng::new(0x007e_512e);
-    let mut d: Vec<f64> = (0..TYPICAL_DRAWS)
-        .filter_map(|_| generate(category, &mut rng).ok())
-        .map(|o| o.object.box_diagonal())
-        .filter(|d| d.is_finite() && *d > 0.0)
-        .collect();
+    median_diagonal(&[category])
+}
+
+/// The median box diagonal over every category the generator makes ([`TYPICAL_DRAWS`] draws of
+/// each): the prior's typical size for a category it has no objects of, or for no category.
+pub fn typical_diagonal_any() -> f64 {
+    median_diagonal(&SYNTH_CATEGORIES).unwrap_or(1.0)
+}
+
+fn median_diagonal(categories: &[&str]) -> Option<f64> {
+    let mut d: Vec<f64> = Vec::new();
+    for c in categories {
+        let mut rng = Rng::new(0x007e_512e);
+        d.extend(
+            (0..TYPICAL_DRAWS)
+                .filter_map(|_| generate(c, &mut rng).ok())
+                .map(|o| o.object.box_diagonal())
+                .filter(|d| d.is_finite() && *d > 0.0),
+        );
+    }
     if d.is_empty() {
         return None;
     }

@@ -318,5 +318,8 @@ fn typical_diagonals_lie_in_the_generators_ranges() {
         assert!((lo..=hi).contains(&d), "{c}: {d}");
     }
     assert_eq!(typical_diagonal("Faucet"), None);
+    let any = typical_diagonal_any();
+    println!("any: {any:.3}");
+    assert!((0.5..2.0).contains(&any), "{any}");
     assert_eq!(typical_diagonal("Door"), typical_diagonal("door"));
 }

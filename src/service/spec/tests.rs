@@ -496,8 +496,8 @@ fn camera_w_free_and_repair_rejections_name_field_limit_and_value() {
 
 #[test]
 fn scale_defaults_to_auto_for_a_known_category_and_is_resolved_at_submission() {
-    // A 0.3 m scan of a door (the generator's doors are about 2 m): auto scales it up, capped
-    // at 4; without a category there is no typical size and no scale.
+    // A 0.34 m scan of a door (the generator's doors are about 2 m): auto scales it up, capped
+    // at 4.
     let small = PointsInput::Triples(
         (0..16)
             .map(|i| [0.0, 0.02 * i as f64, 0.1 + 0.01 * i as f64])
@@ -518,7 +518,10 @@ fn scale_defaults_to_auto_for_a_known_category_and_is_resolved_at_submission() {
     };
     assert_eq!(run(Some("Door"), None).unwrap().scale, Some(4.0));
     assert_eq!(run(Some("Door"), Some("auto")).unwrap().scale, Some(4.0));
-    assert_eq!(run(None, None).unwrap().scale, None);
+    // Without a category, the typical size over every category the prior trained on.
+    let any = crate::data::synth::typical_diagonal_any();
+    let s = run(None, None).unwrap().scale.unwrap();
+    assert!((1.0..4.0).contains(&s) && s > any, "{s} (typical {any})");
     assert_eq!(run(Some("Door"), Some("off")).unwrap().scale, None);
     assert_eq!(run(Some("Door"), Some("2.5")).unwrap().scale, Some(2.5));
     for bad in ["big", "0", "NaN", "20"] {

@@ -414,7 +414,7 @@ pub fn generate_with(
         if let Some(s) = scale {
             object = object.scaled(1.0 / s);
         }
-        let repairs = match req.repair {
+        let mut repairs = match req.repair {
             RepairMode::On => repair(&mut object),
             RepairMode::Off => Vec::new(),
         };
@@ -452,7 +452,9 @@ pub fn generate_with(
                     .as_ref()
                     .filter(|g| !g.cameras.is_empty())
                     .map(|g| FreeSpace::new(&g.points, &g.cameras));
-                prune(&mut object, &mut meshes, free.as_ref())
+                let (removed, attached) = prune(&mut object, &mut meshes, free.as_ref());
+                repairs.extend(attached);
+                removed
             }
             RepairMode::Off => Vec::new(),
         };

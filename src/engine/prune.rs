@@ -12,10 +12,17 @@
 //! - **floating**: its surface is more than [`TOUCH_FRACTION`] of the object's diagonal from
 //!   every other part's surface (it touches nothing).
 //!
-//! Removal repeats until no leaf qualifies (a removed leaf can make its parent a leaf). Every
-//! removal is returned as a [`Removed`] (written to `ranking.json`).
+//! Before that, meshes attach: a child whose surface is more than [`TOUCH_FRACTION`] but at
+//! most `graph::repair::FLOAT_GAP_FRACTION` of the diagonal from its parent's surface (a shape
+//! that does not fill its box, so boxes touch and meshes do not) is moved with its subtree
+//! until the surfaces touch, recorded as an `attach` repair. Removal then repeats until no leaf
+//! qualifies (a removed leaf can make its parent a leaf). Every removal is returned as a
+//! [`Removed`] (written to `ranking.json`).
+
+use nalgebra::Vector3;
 
 use super::free_space::FreeSpace;
+use crate::graph::repair::{FLOAT_GAP_FRACTION, Repair, RepairRule, translate_subtree};
 use crate::mesh::TriMesh;
 use crate::mesh::bvh::MeshBvh;
 use crate::object::ArticulatedObject;
@@ -72,12 +79,7 @@ fn verdict(
     let Some(own) = &bvhs[i] else {
         return Some((RemoveReason::Empty, "its mesh has no triangles".into()));
     };
-    let mut rng = crate::data::rng::Rng::new(0x5eed ^ i as u64);
-    let pts: Vec<[f32; 3]> = own
-        .sample_surface(TEST_POINTS, &mut || rng.uniform())
-        .into_iter()
-        .map(|(p, _)| p)
-        .collect();
+    let pts = surface(own, i);
     if pts.is_empty() {
         return Some((RemoveReason::Empty, "its mesh has no area".into()));
     }
@@ -121,19 +123,77 @@ fn verdict(
     })
 }
 
-/// Remove the leaf parts the scan does not allow (module docs) from `obj` and `meshes` (one
-/// mesh per part, object frame at rest); `free` is the scan's free space when there is a
-/// camera. Returns the removals in order.
+/// Surface samples of mesh `i` (uniform by area, fixed seed per part).
+fn surface(bvh: &MeshBvh, i: usize) -> Vec<[f32; 3]> {
+    let mut rng = crate::data::rng::Rng::new(0x5eed ^ i as u64);
+    bvh.sample_surface(TEST_POINTS, &mut || rng.uniform())
+        .into_iter()
+        .map(|(p, _)| p)
+        .collect()
+}
+
+/// Attach each child's mesh to its parent's (module docs), parents first.
+fn attach_meshes(obj: &mut ArticulatedObject, meshes: &mut [TriMesh]) -> Vec<Repair> {
+    let diag = obj.box_diagonal();
+    let (touch, far) = (TOUCH_FRACTION * diag, FLOAT_GAP_FRACTION * diag);
+    let mut out = Vec::new();
+    for ji in obj.joints_topological() {
+        let (parent, child) = (obj.joints[ji].parent, obj.joints[ji].child);
+        let bvh = |m: &TriMesh| {
+            (!m.triangles.is_empty())
+                .then(|| MeshBvh::new(&m.positions, &m.triangles).ok())
+                .flatten()
+        };
+        let (Some(pb), Some(cb)) = (bvh(&meshes[parent]), bvh(&meshes[child])) else {
+            continue;
+        };
+        let nearest = surface(&cb, child)
+            .into_iter()
+            .filter_map(|p| pb.closest_point(p).map(|(q, d2, _)| (p, q, d2)))
+            .min_by(|a, b| a.2.total_cmp(&b.2));
+        let Some((p, q, d2)) = nearest else { continue };
+        let gap = (d2 as f64).sqrt();
+        if !(gap > touch && gap <= far) {
+            continue;
+        }
+        let shift = Vector3::from_fn(|k, _| (q[k] - p[k]) as f64);
+        for m in translate_subtree(obj, child, shift) {
+            let t = shift.map(|v| v as f32);
+            for v in &mut meshes[m].positions {
+                *v = [v[0] + t.x, v[1] + t.y, v[2] + t.z];
+            }
+        }
+        out.push(Repair {
+            child: obj.parts[child].name.clone(),
+            rule: RepairRule::Attach,
+            amount: gap,
+            detail: format!(
+                "moved {gap:.4} m by [{:.4}, {:.4}, {:.4}] so its surface touches {}'s (surface gap > {touch:.4} m)",
+                shift.x, shift.y, shift.z, obj.parts[parent].name
+            ),
+        });
+    }
+    out
+}
+
+/// Attach the meshes and remove the leaf parts the scan does not allow (module docs) from `obj`
+/// and `meshes` (one mesh per part, object frame at rest); `free` is the scan's free space when
+/// there is a camera. Returns the removals and the attach repairs, each in order.
 pub fn prune(
     obj: &mut ArticulatedObject,
     meshes: &mut Vec<TriMesh>,
     free: Option<&FreeSpace>,
-) -> Vec<Removed> {
+) -> (Vec<Removed>, Vec<Repair>) {
+    let repairs = if meshes.len() == obj.parts.len() {
+        attach_meshes(obj, meshes)
+    } else {
+        Vec::new()
+    };
     let touch = (TOUCH_FRACTION * obj.box_diagonal()) as f32;
     let mut out = Vec::new();
     loop {
         if obj.parts.len() <= 1 || meshes.len() != obj.parts.len() {
-            return out;
+            return (out, repairs);
         }
         let root = obj.root();
         let leaves: Vec<usize> = (0..obj.parts.len())
@@ -151,7 +211,7 @@ pub fn prune(
             .into_iter()
             .find_map(|i| verdict(obj, &bvhs, i, free, touch).map(|v| (i, v)));
         let Some((i, (reason, detail))) = hit else {
-            return out;
+            return (out, repairs);
         };
         out.push(Removed {
             part: obj.parts[i].name.clone(),
@@ -216,7 +276,7 @@ mod tests {
     #[test]
     fn a_floating_part_is_removed_and_a_touching_one_kept() {
         let (mut obj, mut meshes) = object([0.0, 0.0, 1.3]);
-        let r = prune(&mut obj, &mut meshes, None);
+        let r = prune(&mut obj, &mut meshes, None).0;
         assert_eq!(r.len(), 1, "{r:?}");
         assert_eq!(
             (r[0].part.as_str(), r[0].reason),
@@ -226,7 +286,29 @@ mod tests {
         assert_eq!(meshes.len(), 2);
         obj.validate().unwrap();
         let (mut obj, mut meshes) = object([0.0, 0.0, 1.05]);
-        assert!(prune(&mut obj, &mut meshes, None).is_empty());
+        let (removed, attached) = prune(&mut obj, &mut meshes, None);
+        assert!(removed.is_empty() && attached.is_empty());
+    }
+
+    #[test]
+    fn a_part_a_little_off_its_parent_is_moved_to_touch_it() {
+        // 5 cm above the body (diagonal ≈ 1.6 m: more than 1 %, less than 10 %).
+        let (mut obj, mut meshes) = object([0.0, 0.0, 1.1]);
+        let (removed, attached) = prune(&mut obj, &mut meshes, None);
+        assert!(removed.is_empty(), "{removed:?}");
+        assert_eq!(attached.len(), 1);
+        assert_eq!(attached[0].rule, RepairRule::Attach);
+        assert!((attached[0].amount - 0.05).abs() < 1e-3, "{attached:?}");
+        assert!((obj.parts[2].center.z - 1.05).abs() < 1e-3);
+        let lowest = meshes[2]
+            .positions
+            .iter()
+            .map(|p| p[2])
+            .fold(f32::INFINITY, f32::min);
+        assert!(
+            (lowest - 1.0).abs() < 1e-3,
+            "mesh moved with its part: {lowest}"
+        );
     }
 
     #[test]
@@ -240,12 +322,12 @@ mod tests {
             })
             .collect();
         let free = FreeSpace::new(&scan, &[[-2.0, 0.0, 0.5]]);
-        let r = prune(&mut obj, &mut meshes, Some(&free));
+        let r = prune(&mut obj, &mut meshes, Some(&free)).0;
         assert_eq!(r.len(), 1, "{r:?}");
         assert_eq!(r[0].reason, RemoveReason::FreeSpace);
         assert_eq!(obj.parts.len(), 2);
         // Without the camera it stays (it touches the door).
         let (mut obj, mut meshes) = object([-0.37, 0.0, 0.5]);
-        assert!(prune(&mut obj, &mut meshes, None).is_empty());
+        assert!(prune(&mut obj, &mut meshes, None).0.is_empty());
     }
 }

@@ -6,7 +6,9 @@
 //! applied to every joint, parents before children:
 //!
 //! 1. **attach**: a child whose box is more than [`ATTACH_GAP_FRACTION`] of the object's
-//!    diagonal from its parent's box is moved (with everything below it) until the boxes touch;
+//!    diagonal from its parent's box, but at most [`FLOAT_GAP_FRACTION`], is moved (with
+//!    everything below it) until the boxes touch; one farther away floats (the part filter,
+//!    `engine::prune`, removes it when nothing hangs below it);
 //! 2. **snap**: a revolute or screw axis within [`SNAP_ANGLE_DEG`] of a box axis becomes that
 //!    axis; a prismatic axis always runs along the nearest box axis (a slide off its box
 //!    jams);
@@ -25,6 +27,10 @@ use crate::object::{ArticulatedObject, JointKind};
 /// A movable part must touch its parent at rest: box gap ≤ this fraction of the object's box
 /// diagonal.
 pub const ATTACH_GAP_FRACTION: f64 = 0.01;
+/// A child farther than this fraction of the object's diagonal from its parent is not attached
+/// but left floating: it is not a misplaced part of its parent, it is a part the sample put
+/// elsewhere.
+pub const FLOAT_GAP_FRACTION: f64 = 0.10;
 /// A rotation axis within this many degrees of a box axis is snapped to it.
 pub const SNAP_ANGLE_DEG: f64 = 10.0;
 
@@ -80,6 +86,23 @@ fn closing_shift(obj: &ArticulatedObject, parent: usize, child: usize) -> Vector
     })
 }
 
+/// Move part `root` and every part below it by `shift`, with their joints' origins; returns
+/// the parts moved.
+pub fn translate_subtree(
+    obj: &mut ArticulatedObject,
+    root: usize,
+    shift: Vector3<f64>,
+) -> Vec<usize> {
+    let moved = subtree(obj, root);
+    for &p in &moved {
+        obj.parts[p].center += shift;
+    }
+    for j in obj.joints.iter_mut().filter(|j| moved.contains(&j.child)) {
+        j.origin += shift;
+    }
+    moved
+}
+
 /// Parts in the subtree of `root` (itself included).
 fn subtree(obj: &ArticulatedObject, root: usize) -> Vec<usize> {
     let mut out = vec![root];
@@ -108,19 +131,14 @@ fn fmt(v: &Vector3<f64>) -> String {
 pub fn repair(obj: &mut ArticulatedObject) -> Vec<Repair> {
     let mut out = Vec::new();
     let tol = ATTACH_GAP_FRACTION * obj.box_diagonal();
+    let far = FLOAT_GAP_FRACTION * obj.box_diagonal();
     for ji in obj.joints_topological() {
         let (parent, child) = (obj.joints[ji].parent, obj.joints[ji].child);
         let name = obj.parts[child].name.clone();
         // 1. attach.
         let shift = closing_shift(obj, parent, child);
-        if shift.norm() > tol {
-            let moved = subtree(obj, child);
-            for &p in &moved {
-                obj.parts[p].center += shift;
-            }
-            for j in obj.joints.iter_mut().filter(|j| moved.contains(&j.child)) {
-                j.origin += shift;
-            }
+        if shift.norm() > tol && shift.norm() <= far {
+            translate_subtree(obj, child, shift);
             out.push(Repair {
                 child: name.clone(),
                 rule: RepairRule::Attach,

@@ -139,27 +139,32 @@ fn a_slide_runs_along_a_box_axis_whatever_its_angle() {
 
 #[test]
 fn a_floating_lid_is_moved_down_onto_its_base_with_its_subtree() {
-    // A lid 0.2 m above the body (diagonal ≈ 1.4 m: 0.2 m ≫ 1 %), with a knob of its own.
-    let mut o = two_parts(
-        ([0.0, 0.0, 1.25], [0.3, 0.4, 0.05]),
-        JointKind::Revolute,
-        [0.0, 1.0, 0.0],
-        [0.3, 0.0, 1.2],
-    );
-    o.parts
-        .push(part("knob", [0.0, 0.0, 1.32], [0.02, 0.02, 0.02]));
-    o.joints.push(Joint {
-        parent: 1,
-        child: 2,
-        kind: JointKind::Revolute,
-        axis: Vector3::z(),
-        origin: Point3::new(0.0, 0.0, 1.32),
-        revolute: [0.0, 1.0],
-        prismatic: [0.0, 0.0],
-    });
+    // A lid `gap` above the body (diagonal ≈ 1.4 m), with a knob of its own.
+    let lid = |gap: f64| {
+        let mut o = two_parts(
+            ([0.0, 0.0, 1.05 + gap], [0.3, 0.4, 0.05]),
+            JointKind::Revolute,
+            [0.0, 1.0, 0.0],
+            [0.3, 0.0, 1.0 + gap],
+        );
+        o.parts
+            .push(part("knob", [0.0, 0.0, 1.12 + gap], [0.02, 0.02, 0.02]));
+        o.joints.push(Joint {
+            parent: 1,
+            child: 2,
+            kind: JointKind::Revolute,
+            axis: Vector3::z(),
+            origin: Point3::new(0.0, 0.0, 1.12 + gap),
+            revolute: [0.0, 1.0],
+            prismatic: [0.0, 0.0],
+        });
+        o
+    };
+    // 0.1 m: more than 1 % of the diagonal, less than 10 %.
+    let mut o = lid(0.1);
     let r = repair(&mut o);
     assert_eq!(r[0].rule, RepairRule::Attach);
-    assert!((r[0].amount - 0.2).abs() < 1e-12, "{r:?}");
+    assert!((r[0].amount - 0.1).abs() < 1e-12, "{r:?}");
     assert!((o.parts[1].center.z - 1.05).abs() < 1e-12);
     assert!(
         (o.parts[2].center.z - 1.12).abs() < 1e-12,
@@ -169,6 +174,11 @@ fn a_floating_lid_is_moved_down_onto_its_base_with_its_subtree() {
     // The lid's hinge went onto its back top... nearest edge (x = 0.3, z = 1.0 or 1.1).
     assert!((o.joints[0].origin.x - 0.3).abs() < 1e-12);
     o.validate().unwrap();
+    // 0.3 m (more than 10 %): not a misplaced lid but a part elsewhere, left floating (the
+    // part filter removes it).
+    let mut o = lid(0.3);
+    assert!(repair(&mut o).iter().all(|r| r.rule != RepairRule::Attach));
+    assert!((o.parts[1].center.z - 1.35).abs() < 1e-12);
     // A touching child is left where it is.
     let mut o = two_parts(
         DOOR,

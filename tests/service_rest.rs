@@ -991,6 +991,26 @@ async fn cameras_w_free_and_repair_reach_the_job_and_its_ranking() {
     assert_eq!(ranking["repair"], "on");
     let row = &ranking["samples"][0];
     assert!(row["repairs"].as_u64().is_some(), "{ranking:#}");
+    // The score is the sum of its four terms, each listed; a sample without a surface (the
+    // test weights' often are) has no D_pc and so no score, and ranks last.
+    let terms = [
+        "d_pc_per_scan_diagonal",
+        "free",
+        "attach_per_object_diagonal",
+        "o_mesh",
+    ];
+    for t in terms {
+        assert!(row["terms"].get(t).is_some(), "{t}: {ranking:#}");
+    }
+    if row["d_pc"].is_null() {
+        assert!(row["score"].is_null(), "{ranking:#}");
+    } else {
+        let sum: f64 = terms.iter().filter_map(|t| row["terms"][t].as_f64()).sum();
+        assert!(
+            (sum - row["score"].as_f64().unwrap()).abs() < 1e-9,
+            "{ranking:#}"
+        );
+    }
     let removed = row["removed"].as_array().expect("removed is a list");
     for r in removed {
         assert!(!r["part"].as_str().unwrap().is_empty(), "{r}");

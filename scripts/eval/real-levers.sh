@@ -12,6 +12,7 @@
 #   repair   --repair on  --scan-camera ignore --scale off   (joint repair + part removal)
 #   scale    --repair off --scan-camera ignore --scale auto  (the scale hypothesis)
 #   all      --repair on  --scan-camera use    --scale off   (camera + repair)
+#   nocamera --scan-camera ignore                             (the defaults without the camera)
 #   default  (no flags: repair on, camera used, scale auto)
 #
 # A stopped run resumes (eval real skips finished scans). PHYSNAP_BIN names the binary
@@ -31,7 +32,7 @@ run() {
     --python "$PY" "$@" >"$OUT/$name.log" 2>&1
 }
 mkdir -p "$OUT"
-configs=${PHYSNAP_LEVERS:-"none camera repair scale all default"}
+configs=${PHYSNAP_LEVERS:-"none camera repair scale all nocamera default"}
 for c in $configs; do
   case $c in
     none) run none --repair off --scan-camera ignore --scale off ;;
@@ -39,6 +40,7 @@ for c in $configs; do
     repair) run repair --repair on --scan-camera ignore --scale off ;;
     scale) run scale --repair off --scan-camera ignore --scale auto ;;
     all) run all --repair on --scan-camera use --scale off ;;
+    nocamera) run nocamera --scan-camera ignore ;;
     default) run default ;;
     *) echo "unknown configuration $c" >&2; exit 2 ;;
   esac

@@ -15,11 +15,12 @@
 //! not allow (empty, in the cameras' free space, floating).
 //!
 //! Best-of-N: each sample `i` (seed + i) runs on its own; a sample that diverges
-//! ([`EngineError::Diverged`]) is recorded and skipped, and the others are ranked by D_pc
-//! (mean point-to-mesh distance to the job's cloud, ascending; samples without a mesh last).
-//! The best is exported as `model.glb`, `robot.zip` and `object.json`; `ranking.json`
-//! (`physnap.job_ranking/v1`) lists every sample with index, seed, D_pc, O_mesh (surface
-//! buried in another part), its joint repairs (count) and removed parts, whether it diverged
+//! ([`EngineError::Diverged`]) is recorded and skipped, and the others are ranked by the score
+//! of `eval::rank` (the CLI's: D_pc / scan diagonal + free-space share + attachment gap /
+//! object diagonal + O_mesh, ascending; samples without a mesh last). The best is exported as
+//! `model.glb`, `robot.zip` and `object.json`; `ranking.json` (`physnap.job_ranking/v1`) lists
+//! every sample with index, seed, score and its terms, D_pc, O_mesh (surface buried in another
+//! part), its joint repairs (count) and removed parts, whether it diverged
 //! (and why) and which one was exported. If every sample diverges the job fails with
 //! [`RunError::AllDiverged`].
 
@@ -32,6 +33,7 @@ use crate::engine::guidance::{GuidanceLosses, GuidanceOptions, SdfField};
 use crate::engine::sample::step_events;
 use crate::engine::schedule::Schedule;
 use crate::eval::guided::{MESH_OVERLAP_SAMPLES, d_pc, mesh_overlap};
+use crate::eval::rank::{RankTerms, rank_terms};
 use crate::export::{ExportError, ExportOptions, glb, urdf, zip_bundle};
 use crate::graph::{ProjectOptions, project};
 use crate::io::manifest::LoadedModels;
@@ -228,6 +230,8 @@ struct Ranked {
     d_pc: f64,
     /// O_mesh: share of the part surface buried in another part (NaN when diverged).
     o_mesh: f64,
+    /// The ranking terms (None when diverged).
+    terms: Option<crate::eval::rank::RankTerms>,
     diverged: Option<String>,
     /// Parts that took their nearest codebook shape.
     retrieved: Vec<usize>,
@@ -248,7 +252,7 @@ fn ranking_json(spec: &JobSpec, guidance: &Option<GuidanceOptions>, rows: &[Rank
     let best = rows.iter().find(|r| r.diverged.is_none()).map(|r| r.index);
     let doc = serde_json::json!({
         "format": "physnap.job_ranking/v1",
-        "ranked_by": "d_pc (mean point-to-mesh distance to the job's cloud, m; ascending; diverged samples last)",
+        "ranked_by": "score = D_pc / scan diagonal + free-space share + attachment gap / object diagonal + O_mesh (ascending; diverged samples last)",
         "guided": spec.guided(),
         "guidance": guidance.as_ref().map(|g| serde_json::json!({
             "w_pc": g.w_pc, "w_pen": g.w_pen, "w_mob": g.w_mob, "w_free": g.w_free,
@@ -268,6 +272,13 @@ fn ranking_json(spec: &JobSpec, guidance: &Option<GuidanceOptions>, rows: &[Rank
             "rank": rank + 1,
             "index": r.index,
             "seed": r.seed,
+            "score": num(r.terms.map_or(f64::NAN, |t| t.score())),
+            "terms": r.terms.map(|t| serde_json::json!({
+                "d_pc_per_scan_diagonal": num(t.d_pc / t.scan_diagonal),
+                "free": num(t.free),
+                "attach_per_object_diagonal": num(t.attach / t.object_diagonal),
+                "o_mesh": num(t.o_mesh),
+            })),
             "d_pc": num(r.d_pc),
             "o_mesh": num(r.o_mesh),
             "diverged": r.diverged.is_some(),
@@ -404,20 +415,26 @@ pub fn run_job(
             first: diverged.first().map(|d| d.2.clone()).unwrap_or_default(),
         });
     }
-    // Best-of-N by D_pc (NaN, i.e. no mesh, ranks last; ties by index).
+    // Best-of-N by the ranking score (NaN, i.e. no mesh, ranks last; ties by index).
     // `done_samples` is in index order, so ties stay in index order.
-    let scored: Vec<(f64, Generated)> = done_samples
+    let scored: Vec<(RankTerms, Generated)> = done_samples
         .into_iter()
-        .map(|g| (d_pc(&g.meshes, &spec.points), g))
+        .map(|g| {
+            let d = d_pc(&g.meshes, &spec.points);
+            let o = mesh_overlap(&g.object, &g.meshes, MESH_OVERLAP_SAMPLES, g.seed);
+            let t = rank_terms(&g.object, &g.meshes, &spec.points, &spec.cameras, d, o);
+            (t, g)
+        })
         .collect();
-    let mut ranked = crate::eval::rank::ranked(scored, |s| s.0);
+    let mut ranked = crate::eval::rank::ranked(scored, |s| s.0.score());
     let mut rows: Vec<Ranked> = ranked
         .iter()
-        .map(|(d, g)| Ranked {
+        .map(|(t, g)| Ranked {
             index: g.index,
             seed: g.seed,
-            d_pc: *d,
-            o_mesh: mesh_overlap(&g.object, &g.meshes, MESH_OVERLAP_SAMPLES, g.seed),
+            d_pc: t.d_pc,
+            o_mesh: t.o_mesh,
+            terms: Some(*t),
             diverged: None,
             retrieved: g.retrieved.clone(),
             repairs: g.repairs.len(),
@@ -437,6 +454,7 @@ pub fn run_job(
         seed,
         d_pc: f64::NAN,
         o_mesh: f64::NAN,
+        terms: None,
         diverged: Some(e),
         retrieved: Vec::new(),
         repairs: 0,

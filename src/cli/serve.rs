@@ -66,7 +66,7 @@ pub struct ServeArgs {
 }
 
 pub fn serve(a: ServeArgs) -> anyhow::Result<()> {
-    let tenants = Tenants::load(&a.tokens, a.tokens_file.as_deref()).map_err(anyhow::Error::msg)?;
+    let tenants = Tenants::load(&a.tokens, a.tokens_file.as_deref())?;
     if !(a.drain_timeout.is_finite() && a.drain_timeout >= 0.0) {
         anyhow::bail!(
             "invalid --drain-timeout: {} (must be >= 0)",

@@ -6,6 +6,7 @@
 //! line. With no tokens configured every request is the tenant `local`; `serve` allows that
 //! only when every public listener is on a loopback address.
 
+use crate::error::Invalid;
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -22,8 +23,9 @@ pub struct Tenants {
 
 impl Tenants {
     /// Parse `tenant:token` pairs (comma-separated) and, optionally, a file of `tenant token`
-    /// lines (`#` comments). Errors name the entry.
-    pub fn load(inline: &str, file: Option<&Path>) -> Result<Tenants, String> {
+    /// lines (`#` comments). An error names the entry (`--tokens entry 2`, `--tokens-file
+    /// PATH line 3`), the rule and what was there (tokens redacted).
+    pub fn load(inline: &str, file: Option<&Path>) -> Result<Tenants, Invalid> {
         let mut t = Tenants::default();
         for (i, pair) in inline
             .split(',')
@@ -31,37 +33,50 @@ impl Tenants {
             .filter(|p| !p.is_empty())
             .enumerate()
         {
-            let (tenant, token) = pair
-                .split_once(':')
-                .ok_or_else(|| format!("--tokens entry {i}: expected tenant:token"))?;
-            t.add(tenant.trim(), token.trim(), &format!("--tokens entry {i}"))?;
+            let at = format!("--tokens entry {i}");
+            let (tenant, token) = pair.split_once(':').ok_or_else(|| {
+                Invalid::new(
+                    &at,
+                    "tenant:token",
+                    format!("{} characters without ':'", pair.len()),
+                )
+            })?;
+            t.add(tenant.trim(), token.trim(), &at)?;
         }
         if let Some(path) = file {
-            let text = std::fs::read_to_string(path)
-                .map_err(|e| format!("--tokens-file {}: {e}", path.display()))?;
+            let text = std::fs::read_to_string(path).map_err(|e| {
+                Invalid::new(
+                    "--tokens-file",
+                    "a readable file",
+                    format!("{}: {e}", path.display()),
+                )
+            })?;
             for (n, line) in text.lines().enumerate() {
                 let line = line.trim();
                 if line.is_empty() || line.starts_with('#') {
                     continue;
                 }
-                let mut it = line.split_whitespace();
-                let (Some(tenant), Some(token), None) = (it.next(), it.next(), it.next()) else {
-                    return Err(format!(
-                        "--tokens-file {} line {}: expected `tenant token`",
-                        path.display(),
-                        n + 1
+                let at = format!("--tokens-file {} line {}", path.display(), n + 1);
+                let fields: Vec<&str> = line.split_whitespace().collect();
+                let [tenant, token] = fields[..] else {
+                    return Err(Invalid::new(
+                        at,
+                        "`tenant token`",
+                        format!("{} fields", fields.len()),
                     ));
                 };
-                t.add(tenant, token, &format!("{} line {}", path.display(), n + 1))?;
+                t.add(tenant, token, &at)?;
             }
         }
         Ok(t)
     }
 
-    fn add(&mut self, tenant: &str, token: &str, at: &str) -> Result<(), String> {
+    fn add(&mut self, tenant: &str, token: &str, at: &str) -> Result<(), Invalid> {
         if tenant.is_empty() || token.len() < 8 {
-            return Err(format!(
-                "{at}: tenant must be non-empty and the token at least 8 characters"
+            return Err(Invalid::new(
+                at,
+                "a non-empty tenant and a token of at least 8 characters",
+                format!("tenant {tenant:?}, a token of {} characters", token.len()),
             ));
         }
         if self
@@ -69,7 +84,11 @@ impl Tenants {
             .insert(token.to_string(), tenant.to_string())
             .is_some()
         {
-            return Err(format!("{at}: duplicate token"));
+            return Err(Invalid::new(
+                at,
+                "a token no other entry has",
+                "a duplicate token",
+            ));
         }
         Ok(())
     }
@@ -105,5 +124,43 @@ impl Tenants {
             .get(token)
             .cloned()
             .ok_or_else(|| ServiceError::Unauthenticated("unknown bearer token".into()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bad_token_entries_name_the_entry_the_rule_and_what_was_there() {
+        let t = Tenants::load("lab:abcdefgh, other:12345678", None).unwrap();
+        assert!(!t.is_open());
+        let e = Tenants::load("lab:abcdefgh,nocolon", None).unwrap_err();
+        assert_eq!(e.field, "--tokens entry 1");
+        assert!(
+            e.limit.contains("tenant:token") && e.value.contains("7 characters"),
+            "{e}"
+        );
+        let e = Tenants::load("lab:short", None).unwrap_err();
+        assert!(
+            e.limit.contains("at least 8") && e.value.contains("5 characters"),
+            "{e}"
+        );
+        assert!(
+            !e.to_string().contains("short"),
+            "tokens are not echoed: {e}"
+        );
+        let e = Tenants::load("a:abcdefgh,b:abcdefgh", None).unwrap_err();
+        assert_eq!(
+            (e.field.as_str(), e.value.as_str()),
+            ("--tokens entry 1", "a duplicate token")
+        );
+        let dir = tempfile::tempdir().unwrap();
+        let f = dir.path().join("tokens.txt");
+        std::fs::write(&f, "# lab tokens\nlab abcdefgh\nbroken line here\n").unwrap();
+        let e = Tenants::load("", Some(&f)).unwrap_err();
+        assert!(e.field.ends_with("line 3") && e.value == "3 fields", "{e}");
+        let e = Tenants::load("", Some(&dir.path().join("missing"))).unwrap_err();
+        assert_eq!(e.field, "--tokens-file");
     }
 }

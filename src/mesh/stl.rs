@@ -42,10 +42,16 @@ impl Builder {
 
 /// Parse STL bytes (ASCII or binary).
 pub fn parse(bytes: &[u8]) -> Result<TriMesh, StlError> {
-    parse_any(bytes).map_err(StlError)
+    parse_any(bytes)
 }
 
-fn parse_any(bytes: &[u8]) -> Result<TriMesh, String> {
+impl From<String> for StlError {
+    fn from(s: String) -> Self {
+        StlError(s)
+    }
+}
+
+fn parse_any(bytes: &[u8]) -> Result<TriMesh, StlError> {
     if bytes.len() >= 84 {
         let n = u32::from_le_bytes([bytes[80], bytes[81], bytes[82], bytes[83]]) as usize;
         if n.checked_mul(50).and_then(|b| b.checked_add(84)) == Some(bytes.len()) {
@@ -56,15 +62,15 @@ fn parse_any(bytes: &[u8]) -> Result<TriMesh, String> {
         "neither binary STL (size does not match the triangle count) nor ASCII text".to_string()
     })?;
     if !text.trim_start().starts_with("solid") {
-        return Err(
+        return Err(StlError(
             "neither binary STL (size does not match the triangle count) nor ASCII STL (no 'solid')"
                 .into(),
-        );
+        ));
     }
     parse_ascii(text)
 }
 
-fn parse_binary(bytes: &[u8], n: usize) -> Result<TriMesh, String> {
+fn parse_binary(bytes: &[u8], n: usize) -> Result<TriMesh, StlError> {
     let mut b = Builder::default();
     for k in 0..n {
         let rec = &bytes[84 + 50 * k..84 + 50 * (k + 1)];
@@ -74,7 +80,7 @@ fn parse_binary(bytes: &[u8], n: usize) -> Result<TriMesh, String> {
             for (a, c) in p.iter_mut().enumerate() {
                 *c = f(12 + 12 * v + 4 * a);
                 if !c.is_finite() {
-                    return Err(format!("triangle {k}: vertex {v} is not finite"));
+                    return Err(StlError(format!("triangle {k}: vertex {v} is not finite")));
                 }
             }
         }
@@ -83,7 +89,7 @@ fn parse_binary(bytes: &[u8], n: usize) -> Result<TriMesh, String> {
     Ok(b.mesh)
 }
 
-fn parse_ascii(text: &str) -> Result<TriMesh, String> {
+fn parse_ascii(text: &str) -> Result<TriMesh, StlError> {
     let mut b = Builder::default();
     let mut pending: Vec<[f32; 3]> = Vec::with_capacity(3);
     for (ln, line) in text.lines().enumerate() {
@@ -107,11 +113,11 @@ fn parse_ascii(text: &str) -> Result<TriMesh, String> {
             }
             Some("endloop") => {
                 if pending.len() < 3 {
-                    return Err(format!(
+                    return Err(StlError(format!(
                         "line {}: facet with {} vertices",
                         ln + 1,
                         pending.len()
-                    ));
+                    )));
                 }
                 for k in 1..pending.len() - 1 {
                     b.triangle([pending[0], pending[k], pending[k + 1]]);
@@ -122,7 +128,7 @@ fn parse_ascii(text: &str) -> Result<TriMesh, String> {
         }
     }
     if !pending.is_empty() {
-        return Err("unterminated facet at end of file".into());
+        return Err(StlError("unterminated facet at end of file".into()));
     }
     Ok(b.mesh)
 }

@@ -27,6 +27,7 @@
 //! missing OBJ files are skipped (PM keeps references to deleted 0-face parts); fixed children
 //! are merged into their parents; objects with < 2 or > 8 nodes are refused.
 
+use crate::error::CoreError;
 use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -580,8 +581,8 @@ pub fn read_object(dir: &Path) -> Result<ImportedObject, DataError> {
         joints,
     };
     // Validate the link tree before merging (so > 8 links with fixed children still import).
-    validate_loose(&full).map_err(|e| malformed(dir, e))?;
-    let (object, map) = merge_fixed_loose(&full).map_err(|e| malformed(dir, e))?;
+    validate_loose(&full).map_err(|e| malformed(dir, e.to_string()))?;
+    let (object, map) = merge_fixed_loose(&full).map_err(|e| malformed(dir, e.to_string()))?;
     let n = object.parts.len();
     if !(2..=MAX_PARTS).contains(&n) {
         return Err(malformed(
@@ -617,15 +618,18 @@ pub fn read_object(dir: &Path) -> Result<ImportedObject, DataError> {
 }
 
 /// Tree checks that do not require ≤ 8 parts (raw PM objects may have more links).
-fn validate_loose(obj: &ArticulatedObject) -> Result<(), String> {
+fn validate_loose(obj: &ArticulatedObject) -> Result<(), CoreError> {
     if obj.parts.len() <= MAX_PARTS {
-        return obj.validate().map_err(|e| e.to_string());
+        return obj.validate();
     }
     let n = obj.parts.len();
     let mut parent = vec![None; n];
     for j in &obj.joints {
         if parent[j.child].replace(j.parent).is_some() {
-            return Err(format!("link {} has two parents", obj.parts[j.child].name));
+            return Err(CoreError::Structure(format!(
+                "link {} has two parents",
+                obj.parts[j.child].name
+            )));
         }
     }
     for s in 0..n {
@@ -634,7 +638,7 @@ fn validate_loose(obj: &ArticulatedObject) -> Result<(), String> {
             cur = p;
             steps += 1;
             if steps > n {
-                return Err("link parents form a cycle".into());
+                return Err(CoreError::Structure("link parents form a cycle".into()));
             }
         }
     }
@@ -642,18 +646,20 @@ fn validate_loose(obj: &ArticulatedObject) -> Result<(), String> {
 }
 
 /// [`ArticulatedObject::merge_fixed`] for link trees that may exceed 8 parts before merging.
-fn merge_fixed_loose(obj: &ArticulatedObject) -> Result<(ArticulatedObject, Vec<usize>), String> {
+fn merge_fixed_loose(
+    obj: &ArticulatedObject,
+) -> Result<(ArticulatedObject, Vec<usize>), CoreError> {
     if obj.parts.len() <= MAX_PARTS {
-        return obj.merge_fixed().map_err(|e| e.to_string());
+        return obj.merge_fixed();
     }
     let movable = obj
         .joints
         .iter()
         .filter(|j| j.kind != JointKind::Fixed)
         .count();
-    Err(format!(
+    Err(CoreError::Structure(format!(
         "{} links, {} nodes after merging fixed joints (must be between 2 and {MAX_PARTS})",
         obj.parts.len(),
         movable + 1
-    ))
+    )))
 }

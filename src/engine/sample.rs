@@ -22,7 +22,7 @@ use std::ops::ControlFlow;
 
 use burn::tensor::{Device, Int, Tensor, TensorData};
 
-use super::guidance::{GuidanceLosses, GuidanceOptions, SdfField, guidance_loss};
+use super::guidance::{FreeSamples, GuidanceLosses, GuidanceOptions, SdfField, guidance_loss};
 use super::schedule::{Schedule, timesteps};
 use super::{EngineError, from_tensors};
 use crate::data::rng::Rng;
@@ -360,6 +360,10 @@ pub fn sample_guided(
             ),
         )
     });
+    // ℓ_free's samples depend only on the points and cameras: once per run.
+    let free = guidance
+        .map(|(g, _)| FreeSamples::of(g))
+        .unwrap_or_default();
     let times = timesteps(schedule.len(), req.steps);
     let full = times.len() == schedule.len();
     let total = step_events(schedule.len(), req.steps, guidance.map(|(g, _)| g));
@@ -380,6 +384,7 @@ pub fn sample_guided(
             let (grad, values) = guidance_gradient(
                 ctx.field,
                 g,
+                &free,
                 (&va, &ea),
                 (x0v, x0e),
                 &mut mob_rng,
@@ -463,6 +468,7 @@ pub fn sample_guided(
             let (grad, values) = guidance_gradient(
                 ctx.field,
                 g,
+                &free,
                 (&va, &ea),
                 (x0v, x0e),
                 &mut mob_rng,
@@ -537,12 +543,13 @@ type Gradient = (Option<Tensor<3>>, Option<Tensor<3>>);
 fn guidance_gradient(
     field: &dyn SdfField,
     g: &GuidanceOptions,
+    free: &FreeSamples,
     wrt: (&Tensor<3>, &Tensor<3>),
     x0: (Tensor<3>, Tensor<3>),
     mob_rng: &mut Rng,
     (step, t): (usize, usize),
 ) -> Result<(Option<Gradient>, GuidanceLosses), EngineError> {
-    let (loss, mut values) = guidance_loss(field, g, x0.0, x0.1, mob_rng);
+    let (loss, mut values) = guidance_loss(field, g, free, x0.0, x0.1, mob_rng);
     if !values.total.is_finite() {
         return Err(EngineError::Diverged {
             step,

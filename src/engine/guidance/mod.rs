@@ -477,12 +477,39 @@ pub fn decode(nodes: Tensor<2>, edges: Tensor<2>, latent: usize) -> Decoded {
     }
 }
 
+/// The free-space samples ℓ_free evaluates and its margin δ = ½ m. They depend only on the
+/// points and cameras, so a sampler computes them once ([`FreeSamples::of`]) and hands them to
+/// every [`guidance_loss`] call.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FreeSamples {
+    /// The q_k of `engine::free_space`.
+    pub samples: Vec<[f32; 3]>,
+    /// δ (metres).
+    pub delta: f32,
+}
+
+impl FreeSamples {
+    /// The samples of `opts` (none when ℓ_free is off).
+    pub fn of(opts: &GuidanceOptions) -> FreeSamples {
+        if !opts.free_active() {
+            return FreeSamples::default();
+        }
+        let free = super::free_space::FreeSpace::new(&opts.points, &opts.cameras);
+        FreeSamples {
+            samples: free.samples(),
+            delta: 0.5 * free.margin(),
+        }
+    }
+}
+
 /// ℓ of a batch of raw x̂₀ (`nodes` [B, K, 135], `edges` [B, 28, 13]) and the unweighted term
 /// values; the tensor is None when no term has anything to penalise (zero loss, zero gradient).
-/// `rng` draws the mobility states.
+/// `free` is [`FreeSamples::of`] `opts` (used only while ℓ_free is on); `rng` draws the
+/// mobility states.
 pub fn guidance_loss(
     field: &dyn SdfField,
     opts: &GuidanceOptions,
+    free: &FreeSamples,
     nodes: Tensor<3>,
     edges: Tensor<3>,
     rng: &mut Rng,
@@ -500,12 +527,6 @@ pub fn guidance_loss(
             None => t,
         });
     };
-    let free = if opts.free_active() {
-        super::free_space::FreeSpace::new(&opts.points, &opts.cameras)
-    } else {
-        super::free_space::FreeSpace::new(&[], &[])
-    };
-    let free_samples = free.samples();
     for s in 0..b {
         let n = nodes.clone().narrow(0, s, 1).reshape([K, NODE_DIM]);
         let e = edges.clone().narrow(0, s, 1).reshape([NUM_EDGES, EDGE_DIM]);
@@ -532,15 +553,17 @@ pub fn guidance_loss(
                 add(l, opts.w_mob, &mut values.mob, &mut total);
             }
         }
-        if let Some(l) = free::loss(
-            field,
-            &d.parts,
-            d.exist.clone(),
-            &d.host,
-            &free_samples,
-            opts.points.len(),
-            0.5 * free.margin(),
-        ) {
+        if opts.free_active()
+            && let Some(l) = free::loss(
+                field,
+                &d.parts,
+                d.exist.clone(),
+                &d.host,
+                &free.samples,
+                opts.points.len(),
+                free.delta,
+            )
+        {
             add(l, opts.w_free, &mut values.free, &mut total);
         }
     }

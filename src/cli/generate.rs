@@ -116,11 +116,7 @@ pub(crate) fn scale_of(
         "off" => Ok(None),
         "auto" => Ok(auto_scale(
             points,
-            Some(
-                category
-                    .and_then(physnap::data::synth::typical_diagonal)
-                    .unwrap_or_else(physnap::data::synth::typical_diagonal_any),
-            ),
+            Some(physnap::data::synth::prior_diagonal(category)),
         )),
         v => {
             let s: f64 = v

@@ -527,12 +527,9 @@ pub fn validate(
     {
         None | Some("auto") => crate::engine::generate::auto_scale(
             &points,
-            Some(
-                category
-                    .as_ref()
-                    .and_then(|c| crate::data::synth::typical_diagonal(&c.1))
-                    .unwrap_or_else(crate::data::synth::typical_diagonal_any),
-            ),
+            Some(crate::data::synth::prior_diagonal(
+                category.as_ref().map(|c| c.1.as_str()),
+            )),
         ),
         Some("off") => None,
         Some(v) => {

@@ -81,6 +81,15 @@ pub fn typical_diagonal_any() -> f64 {
     median_diagonal(&SYNTH_CATEGORIES).unwrap_or(1.0)
 }
 
+/// The size the prior draws for `category`: its [`typical_diagonal`], or
+/// [`typical_diagonal_any`] for no category or one the generator does not make (what
+/// `--scale auto` scales a scan to, in the CLI and the service alike).
+pub fn prior_diagonal(category: Option<&str>) -> f64 {
+    category
+        .and_then(typical_diagonal)
+        .unwrap_or_else(typical_diagonal_any)
+}
+
 fn median_diagonal(categories: &[&str]) -> Option<f64> {
     let mut d: Vec<f64> = Vec::new();
     for c in categories {

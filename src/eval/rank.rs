@@ -115,6 +115,21 @@ pub fn attach_gap(obj: &ArticulatedObject, meshes: &[TriMesh]) -> f64 {
     worst
 }
 
+/// The ranking terms of a sample, D_pc and O_mesh included (O_mesh sampled with `seed`); for
+/// callers that have not computed them already.
+pub fn sample_terms(
+    obj: &ArticulatedObject,
+    meshes: &[TriMesh],
+    points: &[[f32; 3]],
+    cameras: &[[f32; 3]],
+    seed: u64,
+) -> RankTerms {
+    use crate::eval::guided::{MESH_OVERLAP_SAMPLES, d_pc, mesh_overlap};
+    let d = d_pc(meshes, points);
+    let o = mesh_overlap(obj, meshes, MESH_OVERLAP_SAMPLES, seed);
+    rank_terms(obj, meshes, points, cameras, d, o)
+}
+
 /// The ranking terms of a sample (`o_mesh` as `eval::guided::metrics` computed it).
 pub fn rank_terms(
     obj: &ArticulatedObject,

@@ -32,8 +32,7 @@ use crate::engine::generate::{GenerateRequest, Generated, PartShapes, generate_w
 use crate::engine::guidance::{GuidanceLosses, GuidanceOptions, SdfField};
 use crate::engine::sample::step_events;
 use crate::engine::schedule::Schedule;
-use crate::eval::guided::{MESH_OVERLAP_SAMPLES, d_pc, mesh_overlap};
-use crate::eval::rank::{RankTerms, rank_terms};
+use crate::eval::rank::{RankTerms, sample_terms};
 use crate::export::{ExportError, ExportOptions, glb, urdf, zip_bundle};
 use crate::graph::{ProjectOptions, project};
 use crate::io::manifest::LoadedModels;
@@ -420,9 +419,7 @@ pub fn run_job(
     let scored: Vec<(RankTerms, Generated)> = done_samples
         .into_iter()
         .map(|g| {
-            let d = d_pc(&g.meshes, &spec.points);
-            let o = mesh_overlap(&g.object, &g.meshes, MESH_OVERLAP_SAMPLES, g.seed);
-            let t = rank_terms(&g.object, &g.meshes, &spec.points, &spec.cameras, d, o);
+            let t = sample_terms(&g.object, &g.meshes, &spec.points, &spec.cameras, g.seed);
             (t, g)
         })
         .collect();

@@ -25,7 +25,6 @@ use std::time::Instant;
 use crate::engine::EngineError;
 use crate::engine::generate::{GenerateRequest, Generated, PartShapes, generate_with};
 use crate::engine::schedule::Schedule;
-use crate::eval::guided::d_pc;
 use crate::graph::FeatureScales;
 use crate::mesh::TriMesh;
 use crate::model::denoiser::Denoiser;
@@ -171,17 +170,11 @@ pub fn draw_samples(
                 let mut g = v.remove(0);
                 g.index = k;
                 g.object.name = format!("sample_{k:03}");
-                let d = d_pc(&g.meshes, points);
                 let cameras = req.guidance.as_ref().map_or(&[][..], |o| &o.cameras[..]);
-                let o_mesh = crate::eval::guided::mesh_overlap(
-                    &g.object,
-                    &g.meshes,
-                    crate::eval::guided::MESH_OVERLAP_SAMPLES,
-                    one.seed,
+                let terms = crate::eval::rank::sample_terms(
+                    &g.object, &g.meshes, points, cameras, one.seed,
                 );
-                let terms =
-                    crate::eval::rank::rank_terms(&g.object, &g.meshes, points, cameras, d, o_mesh);
-                (Ok(g), (d, terms.score()))
+                (Ok(g), (terms.d_pc, terms.score()))
             }
             Ok(_) => (Err("no sample returned".to_string()), (f64::NAN, f64::NAN)),
             Err(

@@ -2,9 +2,10 @@
 """sim_check.py: the sim-clean check of docs real-scans.md §3, in MuJoCo.
 
 Why it exists: "the URDF loads in a physics engine and moves" is one of the metrics physnap
-reports on real scans (`physnap eval real`), and only an engine can say it. For every URDF given
-(each with its meshes/ folder, as `physnap export` / `generate` write it) this prints one JSON
-document on stdout:
+reports on real scans (`physnap eval real`), and only an engine can say it; the CI test
+tests/sim_engine.rs also holds physnap's native check (`physnap check-sim`) to MuJoCo's verdicts
+with it. For every URDF or MJCF file given (`robot.urdf` / `model.xml`, each with its meshes/
+folder, as `physnap export` / `generate` write them) this prints one JSON document on stdout:
 
     {"format": "physnap.sim_check/v1", "mujoco": "4.0.0", "depth": 0.005, "states": 5,
      "results": [{"urdf": PATH, "compiled": bool, "error": str|null, "bodies": n,
@@ -15,10 +16,11 @@ A URDF is clean when MuJoCo compiles it, no contact between two distinct bodies 
 `--depth` (5 mm) at rest (every joint at 0), and none is with each movable joint swept over
 `--states` (5) evenly spaced states of its range, the others at 0. Depths are MuJoCo's
 `contact.dist` (negative: penetration) after `mj_forward`, on MuJoCo's collision geometry (the
-convex hull of each mesh).
+convex hull of each collision mesh; physnap exports convex pieces, so the hull is the piece).
 
 Choices:
-- meshes are found by injecting `<mujoco><compiler meshdir=URDF's folder strippath="false"/>`
+- a file ending in `.xml` is MJCF and loads as it is (its meshdir is relative to it); any
+  other file is URDF, whose meshes are found by injecting `<mujoco><compiler meshdir=URDF's folder strippath="false"/>`
   (filenames stay relative to the URDF, as URDF means them); an existing `<mujoco>` element is
   replaced.
 - MuJoCo skips contacts between a body and its parent by default (`filterparent`); the check
@@ -121,8 +123,10 @@ def check(mujoco, path, depth_limit, states):
         "clean": False,
     }
     try:
-        xml = urdf_for_mujoco(path)
-        model = mujoco.MjModel.from_xml_string(xml)
+        if path.endswith(".xml"):
+            model = mujoco.MjModel.from_xml_path(path)
+        else:
+            model = mujoco.MjModel.from_xml_string(urdf_for_mujoco(path))
     except Exception as e:  # MuJoCo raises ValueError on compile errors
         out["error"] = str(e).strip()
         return out
@@ -175,7 +179,9 @@ def check(mujoco, path, depth_limit, states):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("urdf", nargs="*", help="URDF files (each with its meshes/ folder)")
+    ap.add_argument(
+        "urdf", nargs="*", help="URDF or MJCF (.xml) files (each with its meshes/ folder)"
+    )
     ap.add_argument("--probe", action="store_true", help="only check that mujoco imports")
     ap.add_argument("--depth", type=float, default=0.005, help="deepest allowed contact (m)")
     ap.add_argument("--states", type=int, default=5, help="states per joint sweep")

@@ -20,6 +20,7 @@ pub mod pointcloud;
 pub mod render;
 pub mod service;
 pub mod shape;
+pub mod sim;
 pub mod train;
 
 pub use error::{CoreError, CoreResult};

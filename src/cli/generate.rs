@@ -465,6 +465,7 @@ pub(crate) fn generate(a: GenerateArgs) -> anyhow::Result<()> {
                 name,
                 seed: g.seed,
                 metrics: m,
+                terms_json: physnap::io::verdict::terms_json(&g.object, &terms),
                 terms,
                 changes: changes_json(g),
             });
@@ -525,6 +526,8 @@ pub(crate) struct RankRow {
     pub(crate) seed: u64,
     pub(crate) metrics: physnap::eval::guided::GuidedMetrics,
     pub(crate) terms: physnap::eval::rank::RankTerms,
+    /// The terms as `ranking.json` lists them (`io::verdict::terms_json`).
+    pub(crate) terms_json: serde_json::Value,
     /// `repairs` and `removed` (see [`changes_json`]).
     pub(crate) changes: serde_json::Value,
 }
@@ -574,12 +577,7 @@ pub(crate) fn write_ranking(
                 "e_mob": num(m.e_mob),
                 "o_mesh": num(m.o_mesh),
                 "score": num(row.terms.score()),
-                "terms": {
-                    "d_pc_per_scan_diagonal": num(row.terms.d_pc / row.terms.scan_diagonal),
-                    "free": num(row.terms.free),
-                    "attach_per_object_diagonal": num(row.terms.attach / row.terms.object_diagonal),
-                    "o_mesh": num(row.terms.o_mesh),
-                },
+                "terms": row.terms_json,
             });
             if let (Some(v), Some(c)) = (v.as_object_mut(), row.changes.as_object()) {
                 v.extend(c.clone());
@@ -591,7 +589,7 @@ pub(crate) fn write_ranking(
     let doc = serde_json::json!({
         "format": "physnap.ranking/v1",
         "points": points.display().to_string(),
-        "ranked_by": "score = D_pc / scan diagonal + free-space share + attachment gap / object diagonal + O_mesh (lower is better)",
+        "ranked_by": "score = D_pc / scan diagonal + free-space share + attachment gap / object diagonal + O_mesh + sim contact depth / object diagonal (lower is better)",
         "guidance": {
             "w_pc": opts.w_pc, "w_pen": opts.w_pen, "w_mob": opts.w_mob, "w_free": opts.w_free,
             "cameras": opts.cameras, "steps": opts.steps, "tau": opts.tau,

@@ -6,6 +6,7 @@
 //! a shell, a container or a compose file. Errors from the library layers are reported once,
 //! here, with their full cause chain.
 
+mod check_sim;
 mod client;
 mod data;
 mod eval;
@@ -53,6 +54,8 @@ pub(crate) struct Cli {
 pub(crate) enum Command {
     /// Write GLB + URDF (+ meshes, zip bundle) for an articulated-object JSON.
     Export(ExportArgs),
+    /// Check an export directory for contacts at rest and along its joints (exit 1: not clean).
+    CheckSim(check_sim::CheckSimArgs),
     /// Draw objects to a PNG: one object at rest and at its joint limits, or a contact sheet.
     Render(RenderArgs),
     /// Train the shape prior or the articulation denoiser.
@@ -111,6 +114,7 @@ pub(crate) fn main() -> ExitCode {
 pub(crate) fn run(command: Command) -> anyhow::Result<()> {
     match command {
         Command::Export(a) => export::export(a),
+        Command::CheckSim(a) => check_sim::check_sim(a),
         Command::Render(a) => render::render(a),
         Command::Train { command } => train::run(command),
         Command::Generate(a) => generate::generate(a),

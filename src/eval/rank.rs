@@ -11,15 +11,19 @@
 //!       + attach / object diagonal      (largest surface gap of a child to its parent at rest)
 //!       + O_mesh                        (share of surface buried > 5 mm in another part, at rest
 //!                                        and along the joints' motion)
+//!       + sim depth / object diagonal   (deepest contact of the collision pieces export writes,
+//!                                        at rest and along the joints: `crate::sim`)
 //! ```
 //!
 //! A sample with no finite score (no mesh, no points) ranks last; ties keep the samples' own
 //! order.
 
 use crate::engine::free_space::{FreeSpace, extent};
+use crate::export::collision::{CollisionOptions, pieces};
 use crate::mesh::TriMesh;
 use crate::mesh::bvh::MeshBvh;
 use crate::object::ArticulatedObject;
+use crate::sim::{SimOptions, SimReport, check};
 
 /// Surface samples per child part for the attachment gap.
 const ATTACH_SAMPLES: usize = 128;
@@ -39,6 +43,9 @@ pub struct RankTerms {
     pub object_diagonal: f64,
     /// O_mesh.
     pub o_mesh: f64,
+    /// The native physics check of the collision pieces export writes for this sample (default
+    /// collision and check options); `None` when it could not run (no parts).
+    pub sim: Option<SimReport>,
 }
 
 impl RankTerms {
@@ -49,10 +56,12 @@ impl RankTerms {
         } else {
             f64::NAN
         };
+        let sim = self.sim.map_or(0.0, |s| s.worst_depth());
         self.d_pc / self.scan_diagonal.max(1e-9)
             + self.free
             + self.attach / self.object_diagonal.max(1e-9)
             + o
+            + sim / self.object_diagonal.max(1e-9)
     }
 }
 
@@ -147,7 +156,17 @@ pub fn rank_terms(
         attach: attach_gap(obj, meshes),
         object_diagonal: obj.box_diagonal(),
         o_mesh,
+        sim: sim_report(obj, meshes),
     }
+}
+
+/// The native check of `obj` on the collision pieces export makes of `meshes` by default.
+pub fn sim_report(obj: &ArticulatedObject, meshes: &[TriMesh]) -> Option<SimReport> {
+    if meshes.len() != obj.parts.len() {
+        return None;
+    }
+    let p = pieces(obj, meshes, &CollisionOptions::default());
+    check(obj, &p, &SimOptions::default()).ok()
 }
 
 /// The order of `scores` from best to worst: indices into `scores`, ascending by score,

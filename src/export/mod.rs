@@ -13,6 +13,7 @@
 //!
 //! Meshes come from [`mesh_parts`] (marching cubes over each part's SDF, object frame at rest).
 
+pub mod collision;
 pub mod glb;
 pub mod gltf;
 pub mod names;

@@ -8,6 +8,7 @@ pub mod manifest;
 pub mod npy;
 pub mod object_json;
 pub mod real;
+pub mod verdict;
 
 /// Errors of the file-format layer.
 #[derive(Debug, thiserror::Error)]

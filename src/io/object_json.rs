@@ -47,6 +47,10 @@ struct ObjectDoc {
     /// dropped on read.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     repairs: Vec<RepairDoc>,
+    /// The physics check of the export's collision pieces (`io::verdict::sim_json`):
+    /// informational, accepted and dropped on read.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    sim: Option<serde_json::Value>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -164,7 +168,18 @@ pub fn to_string(obj: &ArticulatedObject) -> String {
 /// [`to_string`] with the joint repairs generation made, as `"repairs": [{"joint": <child
 /// part>, "rule", "amount", "detail"}]` (omitted when empty).
 pub fn to_string_with_repairs(obj: &ArticulatedObject, repairs: &[Repair]) -> String {
+    to_string_with(obj, repairs, None)
+}
+
+/// [`to_string_with_repairs`] with the export's physics check as `"sim"` (see
+/// [`crate::io::verdict::sim_json`]).
+pub fn to_string_with(
+    obj: &ArticulatedObject,
+    repairs: &[Repair],
+    sim: Option<&crate::sim::SimReport>,
+) -> String {
     let mut doc = to_doc(obj);
+    doc.sim = sim.map(|r| crate::io::verdict::sim_json(obj, r));
     doc.repairs = repairs
         .iter()
         .map(|r| RepairDoc {
@@ -329,6 +344,7 @@ fn to_doc(obj: &ArticulatedObject) -> ObjectDoc {
             })
             .collect(),
         repairs: Vec::new(),
+        sim: None,
     }
 }
 

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use serde_json::{Value, json};
 
 use crate::eval::real::{
-    JobResult, JointMatch, ObjectMetrics, RowKind, RowSpec, ScanResult, SimResult,
+    JobResult, JointMatch, NativeSim, ObjectMetrics, RowKind, RowSpec, ScanResult, SimResult,
 };
 use crate::object::JointKind;
 
@@ -225,11 +225,17 @@ pub fn job_json(j: &JobResult) -> Value {
             "sweep_depth": opt_num(s.sweep_depth), "worst_bodies": s.worst_bodies, "error": s.error,
         })
     });
+    let native = j.native.as_ref().map(|n| {
+        json!({
+            "clean": n.clean, "worst_depth": num(n.worst_depth),
+            "hulls_clean": n.hulls_clean, "hulls_worst_depth": num(n.hulls_worst_depth),
+        })
+    });
     json!({
         "row": j.row.key(), "kind": j.row.kind.key(), "category_aware": j.row.category_aware,
         "samples": j.samples, "best_sample": j.best.map(|b| b.0), "best_seed": j.best.map(|b| b.1),
         "d_pc": num(j.d_pc), "failed": j.error.is_some(), "error": j.error,
-        "metrics": metrics, "sim": sim, "seconds": j.seconds,
+        "metrics": metrics, "sim": sim, "native": native, "seconds": j.seconds,
     })
 }
 
@@ -301,6 +307,15 @@ fn job_from(v: &Value) -> Option<JobResult> {
             error: s["error"].as_str().map(String::from),
         }),
     };
+    let native = match &v["native"] {
+        Value::Null => None,
+        n => Some(NativeSim {
+            clean: n["clean"].as_bool()?,
+            worst_depth: f(&n["worst_depth"]),
+            hulls_clean: n["hulls_clean"].as_bool()?,
+            hulls_worst_depth: f(&n["hulls_worst_depth"]),
+        }),
+    };
     Some(JobResult {
         row: row_of(v["kind"].as_str()?, v["category_aware"].as_bool()?)?,
         samples: v["samples"].as_u64()? as usize,
@@ -312,6 +327,7 @@ fn job_from(v: &Value) -> Option<JobResult> {
         error: v["error"].as_str().map(String::from),
         metrics,
         sim,
+        native,
         seconds: f(&v["seconds"]),
     })
 }

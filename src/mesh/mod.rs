@@ -12,6 +12,8 @@
 //! current rayon pool; the mesh equals the dense grid's while the field is 3-Lipschitz.
 
 pub mod bvh;
+pub mod convex;
+pub mod decompose;
 pub mod marching_cubes;
 pub mod obj;
 pub mod primitives;

@@ -229,8 +229,10 @@ struct Ranked {
     d_pc: f64,
     /// O_mesh: share of the part surface buried in another part (NaN when diverged).
     o_mesh: f64,
-    /// The ranking terms (None when diverged).
-    terms: Option<crate::eval::rank::RankTerms>,
+    /// The ranking score (NaN when diverged).
+    score: f64,
+    /// The ranking terms as `ranking.json` lists them (None when diverged).
+    terms: Option<serde_json::Value>,
     diverged: Option<String>,
     /// Parts that took their nearest codebook shape.
     retrieved: Vec<usize>,
@@ -251,7 +253,7 @@ fn ranking_json(spec: &JobSpec, guidance: &Option<GuidanceOptions>, rows: &[Rank
     let best = rows.iter().find(|r| r.diverged.is_none()).map(|r| r.index);
     let doc = serde_json::json!({
         "format": "physnap.job_ranking/v1",
-        "ranked_by": "score = D_pc / scan diagonal + free-space share + attachment gap / object diagonal + O_mesh (ascending; diverged samples last)",
+        "ranked_by": "score = D_pc / scan diagonal + free-space share + attachment gap / object diagonal + O_mesh + sim contact depth / object diagonal (ascending; diverged samples last)",
         "guided": spec.guided(),
         "guidance": guidance.as_ref().map(|g| serde_json::json!({
             "w_pc": g.w_pc, "w_pen": g.w_pen, "w_mob": g.w_mob, "w_free": g.w_free,
@@ -271,13 +273,8 @@ fn ranking_json(spec: &JobSpec, guidance: &Option<GuidanceOptions>, rows: &[Rank
             "rank": rank + 1,
             "index": r.index,
             "seed": r.seed,
-            "score": num(r.terms.map_or(f64::NAN, |t| t.score())),
-            "terms": r.terms.map(|t| serde_json::json!({
-                "d_pc_per_scan_diagonal": num(t.d_pc / t.scan_diagonal),
-                "free": num(t.free),
-                "attach_per_object_diagonal": num(t.attach / t.object_diagonal),
-                "o_mesh": num(t.o_mesh),
-            })),
+            "score": num(r.score),
+            "terms": r.terms,
             "d_pc": num(r.d_pc),
             "o_mesh": num(r.o_mesh),
             "diverged": r.diverged.is_some(),
@@ -431,7 +428,8 @@ pub fn run_job(
             seed: g.seed,
             d_pc: t.d_pc,
             o_mesh: t.o_mesh,
-            terms: Some(*t),
+            score: t.score(),
+            terms: Some(crate::io::verdict::terms_json(&g.object, t)),
             diverged: None,
             retrieved: g.retrieved.clone(),
             repairs: g.repairs.len(),
@@ -451,6 +449,7 @@ pub fn run_job(
         seed,
         d_pc: f64::NAN,
         o_mesh: f64::NAN,
+        score: f64::NAN,
         terms: None,
         diverged: Some(e),
         retrieved: Vec::new(),

@@ -498,6 +498,7 @@ fn failed_job(row: RowSpec, why: &str) -> JobResult {
         error: Some(why.to_string()),
         metrics: None,
         sim: None,
+        native: None,
         seconds: 0.0,
     }
 }
@@ -575,6 +576,7 @@ fn summary_json(s: &physnap::eval::real::Summary) -> serde_json::Value {
         "pivot_median": num(s.pivot_median),
         "chamfer_diag_median": num(s.chamfer_median),
         "sim_compiled": s.sim_compiled, "sim_clean": num(S::share(s.sim_clean, s.jobs)), "sim_clean_count": s.sim_clean,
+        "native_clean": num(S::share(s.native_clean, s.jobs)), "hulls_clean": num(S::share(s.hulls_clean, s.jobs)),
         "seconds_median": num(s.seconds_median), "seconds_mean": num(s.seconds_mean),
     })
 }

@@ -239,6 +239,21 @@ pub struct SimResult {
     pub error: Option<String>,
 }
 
+/// The native check ([`crate::sim`]) of a job's export: on the collision pieces export wrote,
+/// and on the convex hull of each whole visual mesh (what an engine makes of a part without
+/// collision pieces).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NativeSim {
+    /// Clean on the exported collision pieces.
+    pub clean: bool,
+    /// Deepest contact on them (m).
+    pub worst_depth: f64,
+    /// Clean on the whole meshes' hulls.
+    pub hulls_clean: bool,
+    /// Deepest contact on the hulls (m).
+    pub hulls_worst_depth: f64,
+}
+
 /// One job: one scan, one row.
 #[derive(Debug, Clone, PartialEq)]
 pub struct JobResult {
@@ -256,6 +271,8 @@ pub struct JobResult {
     pub metrics: Option<ObjectMetrics>,
     /// MuJoCo's check of its export (None: failed before, or not run).
     pub sim: Option<SimResult>,
+    /// The native check of its export (None: failed before, or a result file from before it).
+    pub native: Option<NativeSim>,
     /// Wall time of the job (its samples, export and metrics), seconds.
     pub seconds: f64,
 }
@@ -314,6 +331,10 @@ pub struct Summary {
     pub sim_compiled: usize,
     /// Jobs whose export is sim-clean.
     pub sim_clean: usize,
+    /// Jobs whose export the native check finds clean.
+    pub native_clean: usize,
+    /// Jobs the native check finds clean on each whole mesh's hull instead.
+    pub hulls_clean: usize,
     /// Median job seconds.
     pub seconds_median: f64,
     /// Mean job seconds.
@@ -386,6 +407,10 @@ pub fn summarise<'a>(jobs: impl IntoIterator<Item = (&'a ScanResult, &'a JobResu
             s.sim_compiled += usize::from(sim.compiled);
             s.sim_clean += usize::from(sim.clean);
         }
+        if let Some(n) = &job.native {
+            s.native_clean += usize::from(n.clean);
+            s.hulls_clean += usize::from(n.hulls_clean);
+        }
     }
     s.chamfer_median = median_with_inf(&chamfer);
     s.pivot_median = median_with_inf(&pivots);
@@ -446,6 +471,7 @@ mod tests {
                 worst_bodies: Vec::new(),
                 error: None,
             }),
+            native: None,
             seconds: 2.0,
         }
     }

@@ -24,12 +24,12 @@ fn num(v: f64, digits: usize) -> String {
 }
 
 /// The table header (after a leading `what` column).
-const HEADER: &str = "| jobs | failed | parts exact | joint types exact | axis ≤ 10° (of GT joints) | pivot ≤ 0.05 diag (of GT hinges; matched, median) | chamfer/diag median | sim-clean | seconds median (mean) |";
+const HEADER: &str = "| jobs | failed | parts exact | joint types exact | axis ≤ 10° (of GT joints) | pivot ≤ 0.05 diag (of GT hinges; matched, median) | chamfer/diag median | sim-clean (MuJoCo; native; whole-mesh hulls, native) | seconds median (mean) |";
 
 /// One summary as the cells after the leading column(s).
 pub fn cells(s: &Summary) -> String {
     format!(
-        "| {} | {} | {} | {} | {} | {} ({} matched, median {}) | {} | {} | {} ({}) |",
+        "| {} | {} | {} | {} | {} | {} ({} matched, median {}) | {} | {} ({}; {}) | {} ({}) |",
         s.jobs,
         s.failed,
         pct(s.parts_exact, s.jobs),
@@ -40,6 +40,8 @@ pub fn cells(s: &Summary) -> String {
         num(s.pivot_median, 2),
         num(s.chamfer_median, 3),
         pct(s.sim_clean, s.jobs),
+        pct(s.native_clean, s.jobs),
+        pct(s.hulls_clean, s.jobs),
         num(s.seconds_median, 1),
         num(s.seconds_mean, 1),
     )

@@ -1,0 +1,172 @@
+//! `physnap check-sim DIR`: is an export directory simulation-clean?
+//!
+//! Reads `DIR/object.json` (the kinematics) and the collision pieces the URDF names
+//! (`DIR/meshes/<link>_collision_<k>.obj`, link frames), and runs the native check
+//! ([`physnap::sim`]): contacts at rest and along every joint's sweep. An export without
+//! collision pieces (written before they existed) is decomposed from its visual meshes
+//! (`meshes/<link>.obj`), as export would now do. Prints a summary, or the JSON report with
+//! `--json`; exits 0 when clean, 1 when not (or on an error).
+
+use anyhow::{Context, bail};
+use clap::Args;
+use physnap::export::collision::{CollisionOptions, part_pieces};
+use physnap::export::names::safe_unique;
+use physnap::export::urdf::link_frames;
+use physnap::mesh::{TriMesh, obj};
+use physnap::sim::{SimOptions, SimReport, check};
+use std::path::{Path, PathBuf};
+
+#[derive(Args, Debug)]
+pub(crate) struct CheckSimArgs {
+    /// An export directory (`physnap export`/`generate` output: object.json + meshes/).
+    #[arg(env = "PHYSNAP_CHECK_DIR")]
+    pub(crate) dir: PathBuf,
+
+    /// Deepest contact (metres) a clean object may have.
+    #[arg(long, env = "PHYSNAP_SIM_DEPTH", default_value_t = physnap::sim::DEFAULT_DEPTH)]
+    pub(crate) depth: f64,
+
+    /// Evenly spaced states per joint sweep (limits included).
+    #[arg(long, env = "PHYSNAP_SIM_STATES", default_value_t = physnap::sim::DEFAULT_STATES)]
+    pub(crate) states: usize,
+
+    /// Print the report as JSON (format physnap.sim_report/v1) instead of a summary.
+    #[arg(long, env = "PHYSNAP_SIM_JSON")]
+    pub(crate) json: bool,
+}
+
+fn read_obj(path: &Path, frame: &nalgebra::Vector3<f64>) -> anyhow::Result<TriMesh> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mesh = obj::parse(&text).with_context(|| format!("parsing {}", path.display()))?;
+    let f = frame.map(|v| v as f32);
+    Ok(mesh.map_positions(|p| [p[0] + f.x, p[1] + f.y, p[2] + f.z]))
+}
+
+/// Each part's collision pieces as an export directory holds them (object frame at rest), and
+/// whether they were decomposed from the visual meshes because the directory had none.
+pub(crate) fn read_pieces(
+    dir: &Path,
+    obj: &physnap::object::ArticulatedObject,
+) -> anyhow::Result<(Vec<Vec<TriMesh>>, bool)> {
+    let names = safe_unique(&obj.parts.iter().map(|p| p.name.clone()).collect::<Vec<_>>());
+    let frames = link_frames(obj);
+    let meshes = dir.join("meshes");
+    let mut pieces = Vec::with_capacity(names.len());
+    for (name, frame) in names.iter().zip(&frames) {
+        let mut ps = Vec::new();
+        for k in 0.. {
+            let path = meshes.join(format!("{name}_collision_{k}.obj"));
+            if !path.exists() {
+                break;
+            }
+            ps.push(read_obj(&path, frame)?);
+        }
+        pieces.push(ps);
+    }
+    if pieces.iter().any(|p| !p.is_empty()) {
+        return Ok((pieces, false));
+    }
+    let opts = CollisionOptions::default();
+    let mut decomposed = Vec::with_capacity(names.len());
+    for ((name, frame), part) in names.iter().zip(&frames).zip(&obj.parts) {
+        let path = meshes.join(format!("{name}.obj"));
+        let visual = if path.exists() {
+            read_obj(&path, frame)?
+        } else {
+            TriMesh::default()
+        };
+        decomposed.push(part_pieces(part, &visual, &opts));
+    }
+    Ok((decomposed, true))
+}
+
+/// The report as JSON (`physnap.sim_report/v1`); also what object.json's `sim` holds.
+pub(crate) fn report_json(
+    obj: &physnap::object::ArticulatedObject,
+    r: &SimReport,
+) -> serde_json::Value {
+    let names: Vec<&str> = obj.parts.iter().map(|p| p.name.as_str()).collect();
+    let worst = r.worst.as_ref().map(|w| {
+        serde_json::json!({
+            "depth_m": w.depth,
+            "pair": [names[w.pair[0]], names[w.pair[1]]],
+            "joint": w.joint.map(|k| names[obj.joints[k].child]),
+            "fraction": w.fraction,
+        })
+    });
+    serde_json::json!({
+        "format": "physnap.sim_report/v1",
+        "clean": r.clean,
+        "worst_depth_m": r.worst_depth(),
+        "rest_depth_m": r.rest_depth,
+        "sweep_depth_m": r.sweep_depth,
+        "depth_limit_m": r.options.depth,
+        "states": r.options.states,
+        "worst": worst,
+    })
+}
+
+pub(crate) fn check_sim(a: CheckSimArgs) -> anyhow::Result<()> {
+    let opts = SimOptions {
+        depth: a.depth,
+        states: a.states,
+    };
+    opts.validate()?;
+    let path = a.dir.join("object.json");
+    let obj = physnap::io::object_json::read(&path).with_context(|| {
+        format!(
+            "reading {} (is {} an export directory?)",
+            path.display(),
+            a.dir.display()
+        )
+    })?;
+    let (pieces, decomposed) = read_pieces(&a.dir, &obj)?;
+    if decomposed {
+        tracing::warn!(
+            "{} has no collision pieces (meshes/<link>_collision_<k>.obj); decomposed its visual meshes",
+            a.dir.display()
+        );
+    }
+    let report = check(&obj, &pieces, &opts)?;
+    if a.json {
+        println!("{}", report_json(&obj, &report));
+    } else {
+        let n: usize = pieces.iter().map(Vec::len).sum();
+        println!(
+            "{}: {} parts, {} collision pieces, deepest contact {:.4} m at rest, {:.4} m along the joints (limit {} m, {} states per joint)",
+            a.dir.display(),
+            obj.parts.len(),
+            n,
+            report.rest_depth,
+            report.sweep_depth,
+            opts.depth,
+            opts.states
+        );
+        if let Some(w) = &report.worst {
+            let at = match (w.joint, w.fraction) {
+                (Some(k), Some(f)) => format!(
+                    "with joint {} at {:.0} % of its range",
+                    obj.parts[obj.joints[k].child].name,
+                    100.0 * f
+                ),
+                _ => "at rest".into(),
+            };
+            println!(
+                "deepest: {} and {} {at}, {:.4} m",
+                obj.parts[w.pair[0]].name, obj.parts[w.pair[1]].name, w.depth
+            );
+        }
+    }
+    if !report.clean {
+        bail!(
+            "not sim-clean: a contact {:.4} m deep exceeds {} m",
+            report.worst_depth(),
+            opts.depth
+        );
+    }
+    if !a.json {
+        println!("sim-clean");
+    }
+    Ok(())
+}

@@ -13,7 +13,7 @@ use physnap::export::collision::{CollisionOptions, part_pieces};
 use physnap::export::names::safe_unique;
 use physnap::export::urdf::link_frames;
 use physnap::mesh::{TriMesh, obj};
-use physnap::sim::{SimOptions, SimReport, check};
+use physnap::sim::{SimOptions, check};
 use std::path::{Path, PathBuf};
 
 #[derive(Args, Debug)]
@@ -81,32 +81,6 @@ pub(crate) fn read_pieces(
     Ok((decomposed, true))
 }
 
-/// The report as JSON (`physnap.sim_report/v1`); also what object.json's `sim` holds.
-pub(crate) fn report_json(
-    obj: &physnap::object::ArticulatedObject,
-    r: &SimReport,
-) -> serde_json::Value {
-    let names: Vec<&str> = obj.parts.iter().map(|p| p.name.as_str()).collect();
-    let worst = r.worst.as_ref().map(|w| {
-        serde_json::json!({
-            "depth_m": w.depth,
-            "pair": [names[w.pair[0]], names[w.pair[1]]],
-            "joint": w.joint.map(|k| names[obj.joints[k].child]),
-            "fraction": w.fraction,
-        })
-    });
-    serde_json::json!({
-        "format": "physnap.sim_report/v1",
-        "clean": r.clean,
-        "worst_depth_m": r.worst_depth(),
-        "rest_depth_m": r.rest_depth,
-        "sweep_depth_m": r.sweep_depth,
-        "depth_limit_m": r.options.depth,
-        "states": r.options.states,
-        "worst": worst,
-    })
-}
-
 pub(crate) fn check_sim(a: CheckSimArgs) -> anyhow::Result<()> {
     let opts = SimOptions {
         depth: a.depth,
@@ -130,7 +104,9 @@ pub(crate) fn check_sim(a: CheckSimArgs) -> anyhow::Result<()> {
     }
     let report = check(&obj, &pieces, &opts)?;
     if a.json {
-        println!("{}", report_json(&obj, &report));
+        let mut doc = physnap::io::verdict::sim_json(&obj, &report);
+        doc["format"] = "physnap.sim_report/v1".into();
+        println!("{doc}");
     } else {
         let n: usize = pieces.iter().map(Vec::len).sum();
         println!(

@@ -394,7 +394,7 @@ mod tests {
 
         // A 0.2 × 0.4 × 0.6 box turned 30° about z: the products come out with their sign.
         let h = Vector3::new(0.1, 0.2, 0.3);
-        let r = Rotation3::from_axis_angle(&Vector3::z_axis(), 0.5236);
+        let r = Rotation3::from_axis_angle(&Vector3::z_axis(), std::f64::consts::FRAC_PI_6);
         let flat = box_part("b", [0.0; 3], [h.x, h.y, h.z]);
         let mesh = part_primitive_mesh(&flat).unwrap().map_positions(|p| {
             let v = r * Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);

@@ -1,9 +1,9 @@
 //! MJCF export: `model.xml`, MuJoCo's native format, next to `robot.urdf`.
 //!
-//! Why it exists: MuJoCo reads URDF only through a lossy importer (no visual geoms with
-//! `discardvisual`, no geom groups, meshes found through an injected `<compiler>`); a native
-//! MJCF file opens in MuJoCo's viewer and in `mujoco.MjModel.from_xml_path` as it is. It
-//! describes the same model as [`super::urdf`], so a simulation of either agrees:
+//! Why it exists: MuJoCo's URDF importer drops visual geoms by default, has no geom groups and
+//! finds meshes only through an injected `<mujoco><compiler>` element (scripts/sim_check.py);
+//! a native MJCF file opens in MuJoCo's viewer and in `mujoco.MjModel.from_xml_path` as it is.
+//! It describes the same model as [`super::urdf`], so a simulation of either agrees:
 //!
 //! - one `<body>` per part with the URDF link's name, nested as the kinematic tree; the root
 //!   body is fixed to the world (no joint), like the URDF's root link. A body's frame is its

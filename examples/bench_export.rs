@@ -5,7 +5,8 @@
 
 use std::time::Instant;
 
-use physnap::export::{ExportOptions, export_dir, glb, mesh_parts, urdf};
+use physnap::export::inertial::inertial;
+use physnap::export::{ExportOptions, collision_from_visual, export_dir, glb, mesh_parts, urdf};
 use physnap::mesh::{MeshingOptions, extract_normalised};
 
 #[global_allocator]
@@ -56,7 +57,16 @@ fn main() {
         };
         let (t_mesh, meshes) = best_of(3, || mesh_parts(&obj, None, &opts.meshing).unwrap());
         let (t_glb, _) = best_of(3, || glb::build(&obj, &meshes, &opts).unwrap());
-        let (t_urdf, _) = best_of(3, || urdf::build(&obj, &meshes, &opts));
+        let collision = collision_from_visual(&meshes);
+        let inertials: Vec<_> = obj
+            .parts
+            .iter()
+            .zip(&meshes)
+            .map(|(p, m)| inertial(p, m, &opts.inertial))
+            .collect();
+        let (t_urdf, _) = best_of(3, || {
+            urdf::build(&obj, &meshes, &collision, &inertials, &opts)
+        });
         let (t_all, _) = best_of(3, || export_dir(&obj, &meshes, &dir, &opts).unwrap());
         let tris: usize = meshes.iter().map(|m| m.triangles.len()).sum();
         println!(

@@ -1,6 +1,8 @@
 //! Export acceptance: every GLB and URDF we write passes the real validators (Khronos
 //! glTF-Validator, urdfdom's check_urdf), the URDF parses back with urdf-rs with matching
-//! joints and limits, and the GLB carries the hierarchy, extras and one animation per joint.
+//! joints, limits and dynamics, one visual and one collision mesh per part and inertials every
+//! engine accepts, and the GLB carries the hierarchy, extras and one animation per joint.
+//! (MuJoCo's view of the URDF and the MJCF is tests/mjcf.rs.)
 
 mod common;
 
@@ -38,6 +40,39 @@ fn check_urdf_matches(obj: &ArticulatedObject, urdf_path: &Path) {
             .filter(|j| j.kind == JointKind::Screw)
             .count();
     assert_eq!(robot.links.len(), expected_links);
+    let dir = urdf_path.parent().unwrap();
+    for link in &robot.links {
+        // Inertials every engine accepts: mass > 0, positive definite, triangle inequality.
+        let i = &link.inertial.inertia;
+        let t = nalgebra::Matrix3::new(
+            i.ixx, i.ixy, i.ixz, i.ixy, i.iyy, i.iyz, i.ixz, i.iyz, i.izz,
+        );
+        let mut m: Vec<f64> = t.symmetric_eigenvalues().iter().copied().collect();
+        m.sort_by(f64::total_cmp);
+        assert!(link.inertial.mass.value > 0.0, "{} mass", link.name);
+        assert!(
+            m[0] > 0.0 && m[0] + m[1] >= m[2],
+            "{}: moments {m:?}",
+            link.name
+        );
+        if link.name.ends_with("_screw_helper") {
+            continue;
+        }
+        // The visual mesh and its fallback collision piece, both on disk.
+        let file = |g: &urdf_rs::Geometry| match g {
+            urdf_rs::Geometry::Mesh { filename, .. } => filename.clone(),
+            other => panic!("{}: {other:?}", link.name),
+        };
+        assert_eq!(link.visual.len(), 1, "{}", link.name);
+        assert_eq!(
+            file(&link.visual[0].geometry),
+            format!("meshes/{}.obj", link.name)
+        );
+        assert_eq!(link.collision.len(), 1, "{}", link.name);
+        let piece = file(&link.collision[0].geometry);
+        assert_eq!(piece, format!("meshes/{}_collision_0.obj", link.name));
+        assert!(dir.join(&piece).is_file(), "{piece}");
+    }
     for j in &obj.joints {
         let child = &obj.parts[j.child].name;
         let find = |name: &str| {
@@ -51,6 +86,15 @@ fn check_urdf_matches(obj: &ArticulatedObject, urdf_path: &Path) {
             assert!((x.limit.lower - r[0]).abs() < 1e-12, "{} lower", x.name);
             assert!((x.limit.upper - r[1]).abs() < 1e-12, "{} upper", x.name);
             assert!(x.limit.effort > 0.0 && x.limit.velocity > 0.0);
+            let d = x
+                .dynamics
+                .as_ref()
+                .expect("movable joints carry <dynamics>");
+            let defaults = ExportOptions::default();
+            assert_eq!(
+                (d.damping, d.friction),
+                (defaults.damping, defaults.friction)
+            );
             for a in 0..3 {
                 assert!((x.axis.xyz[a] - j.axis[a]).abs() < 1e-12, "{} axis", x.name);
             }
@@ -168,7 +212,13 @@ fn zip_bundle_holds_urdf_and_meshes_and_export_is_deterministic() {
     let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
     export(&obj, a.path());
     export(&obj, b.path());
-    for f in ["model.glb", "robot.urdf", "robot.zip", "object.json"] {
+    for f in [
+        "model.glb",
+        "robot.urdf",
+        "model.xml",
+        "robot.zip",
+        "object.json",
+    ] {
         assert_eq!(
             std::fs::read(a.path().join(f)).unwrap(),
             std::fs::read(b.path().join(f)).unwrap(),
@@ -180,12 +230,17 @@ fn zip_bundle_holds_urdf_and_meshes_and_export_is_deterministic() {
     let mut zip = zip::ZipArchive::new(std::io::Cursor::new(bytes)).unwrap();
     let names: Vec<String> = zip.file_names().map(String::from).collect();
     assert!(names.contains(&"robot.urdf".to_string()));
+    assert!(names.contains(&"model.xml".to_string()));
     for p in &obj.parts {
-        assert!(
-            names.contains(&format!("meshes/{}.obj", p.name)),
-            "{names:?}"
-        );
+        for f in [
+            format!("meshes/{}.obj", p.name),
+            format!("meshes/{}_collision_0.obj", p.name),
+        ] {
+            assert!(names.contains(&f), "{f} not in {names:?}");
+        }
     }
+    // Nothing but the two documents and the meshes, sorted as written.
+    assert_eq!(names.len(), 2 + 2 * obj.parts.len(), "{names:?}");
     let out = tempfile::tempdir().unwrap();
     zip.extract(out.path()).unwrap();
     check_urdf_matches(&obj, &out.path().join("robot.urdf"));
@@ -204,4 +259,33 @@ fn object_json_round_trips_exactly() {
     let obj = random_object(&mut rng, 8);
     let text = physnap::io::object_json::to_string(&obj);
     assert_eq!(physnap::io::object_json::from_str(&text).unwrap(), obj);
+}
+
+#[test]
+fn bad_export_options_name_field_limit_and_value() {
+    let obj = physnap::fixtures::cabinet();
+    let meshes = mesh_parts(&obj, None, &MeshingOptions { resolution: 16 }).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut opts = ExportOptions::default();
+    opts.inertial.density = -2.5;
+    let e = export_dir(&obj, &meshes, dir.path(), &opts).unwrap_err();
+    let s = e.to_string();
+    assert!(
+        s.contains("density") && s.contains("> 0") && s.contains("-2.5"),
+        "{s}"
+    );
+    assert_eq!(e.error_type(), "invalid_field");
+    let opts = ExportOptions {
+        damping: f64::NAN,
+        ..Default::default()
+    };
+    let s = export_dir(&obj, &meshes, dir.path(), &opts)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        s.contains("damping") && s.contains(">= 0") && s.contains("NaN"),
+        "{s}"
+    );
+    // Nothing was written.
+    assert!(!dir.path().join("robot.urdf").exists());
 }

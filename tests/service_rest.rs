@@ -75,7 +75,7 @@ async fn submit_stream_download_validate_resume() {
     assert_eq!(states, ["QUEUED", "RUNNING", "SUCCEEDED"]);
     assert_eq!(
         evs.iter().filter(|e| e.event == "artifact").count(),
-        4,
+        physnap::service::api::ARTIFACT_NAMES.len(),
         "{kinds:?}"
     );
     let progress: Vec<Value> = evs
@@ -131,13 +131,25 @@ async fn submit_stream_download_validate_resume() {
     std::fs::write(&path, &glb).unwrap();
     let report = common::gltf_validate(&path);
     assert_eq!(report["numErrors"], 0, "{report:#}");
-    for name in ["robot.zip", "object.json"] {
+    for (name, media) in [
+        ("robot.zip", "application/zip"),
+        ("model.xml", "application/xml"),
+        ("object.json", "application/json"),
+    ] {
         let r = c
             .get(s.url(&format!("{loc}/artifacts/{name}")))
             .send()
             .await
             .unwrap();
         assert_eq!(r.status(), 200, "{name}");
+        assert_eq!(r.headers()["content-type"], media, "{name}");
+        if name == "model.xml" {
+            let xml = r.text().await.unwrap();
+            assert!(
+                xml.starts_with("<mujoco model=") && xml.contains("<worldbody>"),
+                "{xml}"
+            );
+        }
     }
     let obj: Value = c
         .get(s.url(&format!("{loc}/artifacts/object.json")))

@@ -1,4 +1,5 @@
-//! `physnap export`: a hand-written or generated object JSON to GLB + URDF, no model needed.
+//! `physnap export`: a hand-written or generated object JSON to GLB + URDF + MJCF, no model
+//! needed.
 
 use anyhow::Context;
 use clap::Args;
@@ -57,6 +58,9 @@ pub(crate) fn export(a: ExportArgs) -> anyhow::Result<()> {
     );
     for p in &report.empty_parts {
         tracing::warn!(part = %p, "part mesh is empty; it has no geometry in the outputs");
+    }
+    for note in &report.notes {
+        tracing::warn!("{note}");
     }
     for f in &report.files {
         println!("{}", a.out.join(f).display());

@@ -422,7 +422,7 @@ pub(crate) fn generate(a: GenerateArgs) -> anyhow::Result<()> {
     for g in &results {
         let name = format!("sample_{:03}", g.index);
         let dir = a.out.join(&name);
-        export_dir_with_repairs(&g.object, &g.meshes, &g.repairs, &dir, &opts)?;
+        let report = export_dir_with_repairs(&g.object, &g.meshes, &g.repairs, &dir, &opts)?;
         println!(
             "{}: {} parts, {} joints (seed {})",
             dir.display(),
@@ -430,6 +430,9 @@ pub(crate) fn generate(a: GenerateArgs) -> anyhow::Result<()> {
             g.object.joints.len(),
             g.seed
         );
+        for note in &report.notes {
+            println!("  note: {note}");
+        }
         for r in &g.repairs {
             println!("  repair {} {}: {}", r.child, r.rule.as_str(), r.detail);
         }

@@ -1,26 +1,32 @@
-//! URDF export: `robot.urdf` plus `meshes/<link>.obj`.
+//! URDF export: `robot.urdf` plus `meshes/<link>.obj` and `meshes/<link>_collision_<k>.obj`.
 //!
-//! Why it exists: URDF is what simulators (PyBullet, SAPIEN, MuJoCo via conversion, Isaac)
-//! load. Layout:
+//! Why it exists: URDF is what simulators (PyBullet, SAPIEN, MuJoCo, Isaac) load. Layout:
 //!
-//! - one `<link>` per part, with visual + collision mesh and a box inertial (density ×
-//!   box volume, solid-box inertia about the box centre);
+//! - one `<link>` per part (names from [`super::names::link_names`]) with a `<visual>` mesh
+//!   `meshes/<link>.obj`, one `<collision>` per collision piece `meshes/<link>_collision_<k>.obj`
+//!   (k = 0, 1, … over the part's non-empty pieces; a part without pieces has no collision) and
+//!   the `<inertial>` of [`super::inertial`] (origin = centre of mass in the link frame, the full
+//!   tensor `ixx … izz` with its products);
 //! - link frames: the root link's frame is the object frame; every other link's frame sits
 //!   at its joint origin (a point on the joint axis, object frame at rest), axes parallel to the
-//!   object frame. Mesh files are written in their link's frame, so `<visual><origin>` is zero;
+//!   object frame. Mesh files are written in their link's frame, so every `<origin>` of a
+//!   visual or collision is zero;
 //! - joint `<origin xyz>` = child frame − parent frame; `<axis>` = the unit joint axis;
 //!   `<limit>` always carries `effort` and `velocity` (urdf-rs and many loaders require them);
+//!   every movable joint has `<dynamics damping friction>` ([`ExportOptions`]);
 //! - a screw joint becomes `prismatic` parent → `<child>_screw_helper` and `revolute`
-//!   helper → child, both about the same axis (PartNet-Mobility's convention, data.md §A.3).
+//!   helper → child, both about the same axis (PartNet-Mobility's convention, data.md §A.3);
+//!   the helper link carries the floor inertial (`min_mass`, every moment m·t²/6).
 //!
 //! Numbers use Rust's shortest round-trip formatting, so the file re-reads bit-exactly.
 
 use std::fmt::Write;
 
-use nalgebra::Vector3;
+use nalgebra::{Matrix3, Vector3};
 
 use super::ExportOptions;
-use super::names::safe_unique;
+use super::inertial::Inertial;
+use super::names::{link_names, safe_unique};
 use crate::mesh::TriMesh;
 use crate::object::{ArticulatedObject, JointKind};
 
@@ -36,7 +42,8 @@ pub const PALETTE: [[f32; 3]; 8] = [
     [0.64, 0.08, 0.18],
 ];
 
-/// A URDF document and its mesh files (file name → OBJ text), sorted by name.
+/// A URDF document and its mesh files (file name → OBJ text), sorted by name. The MJCF
+/// writer ([`super::mjcf`]) refers to the same files.
 #[derive(Debug, Clone, PartialEq)]
 pub struct UrdfBundle {
     /// `robot.urdf` contents.
@@ -55,68 +62,147 @@ pub fn link_frames(obj: &ArticulatedObject) -> Vec<Vector3<f64>> {
         .collect()
 }
 
-fn v(a: &Vector3<f64>) -> String {
+pub(crate) fn v(a: &Vector3<f64>) -> String {
     format!("{} {} {}", a.x, a.y, a.z)
 }
 
-fn xml_escape(s: &str) -> String {
+pub(crate) fn xml_escape(s: &str) -> String {
     s.replace('&', "&amp;")
         .replace('<', "&lt;")
         .replace('>', "&gt;")
         .replace('"', "&quot;")
 }
 
-/// Build the URDF and its OBJ meshes. `meshes[p]` is part p's mesh in the object frame at rest.
-pub fn build(obj: &ArticulatedObject, meshes: &[TriMesh], opts: &ExportOptions) -> UrdfBundle {
-    let names = safe_unique(&obj.parts.iter().map(|p| p.name.clone()).collect::<Vec<_>>());
+/// File name (under `meshes/`) of collision piece `k` of `link`.
+pub fn collision_file(link: &str, k: usize) -> String {
+    format!("{link}_collision_{k}.obj")
+}
+
+/// The non-empty collision pieces of a part, numbered as in their file names.
+pub(crate) fn pieces(collision: &[TriMesh]) -> impl Iterator<Item = (usize, &TriMesh)> {
+    collision.iter().filter(|m| !m.is_empty()).enumerate()
+}
+
+/// The inertial a screw joint's helper link carries: the floors of `opts`.
+pub(crate) fn helper_inertial(opts: &ExportOptions) -> Inertial {
+    let m = opts.inertial.min_mass;
+    let t = opts.inertial.min_thickness;
+    Inertial {
+        mass: m,
+        com: Vector3::zeros(),
+        inertia: Matrix3::identity() * (m * t * t / 6.0),
+    }
+}
+
+/// Build the URDF and its OBJ meshes. `meshes[p]` is part p's visual mesh, `collision[p]` its
+/// convex collision pieces and `inertials[p]` its inertial, all in the object frame at rest;
+/// one entry per part in each (panics otherwise; [`super::artefacts`] checks the lengths).
+pub fn build(
+    obj: &ArticulatedObject,
+    meshes: &[TriMesh],
+    collision: &[Vec<TriMesh>],
+    inertials: &[Inertial],
+    opts: &ExportOptions,
+) -> UrdfBundle {
+    let names = link_names(obj);
+    UrdfBundle {
+        urdf: document(obj, &names, meshes, collision, inertials, opts),
+        meshes: mesh_files(obj, &names, meshes, collision),
+    }
+}
+
+/// The OBJ files of [`build`] (visual `<link>.obj` with normals, collision pieces without),
+/// each in its link's frame, sorted by file name.
+pub(crate) fn mesh_files(
+    obj: &ArticulatedObject,
+    names: &[String],
+    meshes: &[TriMesh],
+    collision: &[Vec<TriMesh>],
+) -> Vec<(String, String)> {
+    let frames = link_frames(obj);
+    let mut files = Vec::new();
+    for p in 0..obj.parts.len() {
+        if !meshes[p].is_empty() {
+            files.push((
+                format!("{}.obj", names[p]),
+                obj_text(&meshes[p], &frames[p]),
+            ));
+        }
+        for (k, piece) in pieces(&collision[p]) {
+            files.push((
+                collision_file(&names[p], k),
+                positions_obj_text(piece, &frames[p]),
+            ));
+        }
+    }
+    files.sort();
+    files
+}
+
+/// `<inertial>` of `i` for a link whose frame sits at `frame`.
+fn write_inertial(x: &mut String, indent: &str, i: &Inertial, frame: &Vector3<f64>) {
+    let t = &i.inertia;
+    let _ = writeln!(x, "{indent}<inertial>");
+    let _ = writeln!(
+        x,
+        "{indent}  <origin xyz=\"{}\" rpy=\"0 0 0\"/>",
+        v(&(i.com - frame))
+    );
+    let _ = writeln!(x, "{indent}  <mass value=\"{}\"/>", i.mass);
+    let _ = writeln!(
+        x,
+        "{indent}  <inertia ixx=\"{}\" ixy=\"{}\" ixz=\"{}\" iyy=\"{}\" iyz=\"{}\" izz=\"{}\"/>",
+        t[(0, 0)],
+        t[(0, 1)],
+        t[(0, 2)],
+        t[(1, 1)],
+        t[(1, 2)],
+        t[(2, 2)]
+    );
+    let _ = writeln!(x, "{indent}</inertial>");
+}
+
+/// The URDF text of [`build`] with the link names given (one per part).
+pub(crate) fn document(
+    obj: &ArticulatedObject,
+    names: &[String],
+    meshes: &[TriMesh],
+    collision: &[Vec<TriMesh>],
+    inertials: &[Inertial],
+    opts: &ExportOptions,
+) -> String {
     let frames = link_frames(obj);
     let robot = safe_unique(std::slice::from_ref(&obj.name)).remove(0);
     let mut x = String::new();
     // Writing into a String cannot fail; the `let _ =` below discard Ok(()).
     let _ = writeln!(x, "<?xml version=\"1.0\"?>");
     let _ = writeln!(x, "<robot name=\"{}\">", xml_escape(&robot));
-    let mut mesh_files = Vec::new();
-    for (p, part) in obj.parts.iter().enumerate() {
-        let name = &names[p];
+    for (p, name) in names.iter().enumerate() {
         let [r, g, b] = PALETTE[p % PALETTE.len()];
-        let com = part.center - frames[p];
-        let h = part.half_extents;
-        let mass = opts.density * part.volume();
-        let (sx, sy, sz) = (
-            (2.0 * h.x).powi(2),
-            (2.0 * h.y).powi(2),
-            (2.0 * h.z).powi(2),
-        );
         let _ = writeln!(x, "  <link name=\"{name}\">");
-        let _ = writeln!(x, "    <inertial>");
-        let _ = writeln!(x, "      <origin xyz=\"{}\" rpy=\"0 0 0\"/>", v(&com));
-        let _ = writeln!(x, "      <mass value=\"{mass}\"/>");
-        let _ = writeln!(
-            x,
-            "      <inertia ixx=\"{}\" ixy=\"0\" ixz=\"0\" iyy=\"{}\" iyz=\"0\" izz=\"{}\"/>",
-            mass * (sy + sz) / 12.0,
-            mass * (sx + sz) / 12.0,
-            mass * (sx + sy) / 12.0
-        );
-        let _ = writeln!(x, "    </inertial>");
+        write_inertial(&mut x, "    ", &inertials[p], &frames[p]);
         if !meshes[p].is_empty() {
-            let file = format!("{name}.obj");
-            for tag in ["visual", "collision"] {
-                let _ = writeln!(x, "    <{tag}>");
-                let _ = writeln!(x, "      <origin xyz=\"0 0 0\" rpy=\"0 0 0\"/>");
-                let _ = writeln!(
-                    x,
-                    "      <geometry><mesh filename=\"meshes/{file}\"/></geometry>"
-                );
-                if tag == "visual" {
-                    let _ = writeln!(
-                        x,
-                        "      <material name=\"{name}_color\"><color rgba=\"{r} {g} {b} 1\"/></material>"
-                    );
-                }
-                let _ = writeln!(x, "    </{tag}>");
-            }
-            mesh_files.push((file, obj_text(&meshes[p], &frames[p])));
+            let _ = writeln!(x, "    <visual>");
+            let _ = writeln!(x, "      <origin xyz=\"0 0 0\" rpy=\"0 0 0\"/>");
+            let _ = writeln!(
+                x,
+                "      <geometry><mesh filename=\"meshes/{name}.obj\"/></geometry>"
+            );
+            let _ = writeln!(
+                x,
+                "      <material name=\"{name}_color\"><color rgba=\"{r} {g} {b} 1\"/></material>"
+            );
+            let _ = writeln!(x, "    </visual>");
+        }
+        for (k, _) in pieces(&collision[p]) {
+            let _ = writeln!(x, "    <collision>");
+            let _ = writeln!(x, "      <origin xyz=\"0 0 0\" rpy=\"0 0 0\"/>");
+            let _ = writeln!(
+                x,
+                "      <geometry><mesh filename=\"meshes/{}\"/></geometry>",
+                collision_file(name, k)
+            );
+            let _ = writeln!(x, "    </collision>");
         }
         let _ = writeln!(x, "  </link>");
     }
@@ -144,6 +230,11 @@ pub fn build(obj: &ArticulatedObject, meshes: &[TriMesh], opts: &ExportOptions) 
             if let Some(limit) = limit {
                 let _ = writeln!(x, "    <axis xyz=\"{axis}\"/>");
                 let _ = writeln!(x, "    {limit}");
+                let _ = writeln!(
+                    x,
+                    "    <dynamics damping=\"{}\" friction=\"{}\"/>",
+                    opts.damping, opts.friction
+                );
             }
             let _ = writeln!(x, "  </joint>");
         };
@@ -190,20 +281,15 @@ pub fn build(obj: &ArticulatedObject, meshes: &[TriMesh], opts: &ExportOptions) 
                     &Vector3::zeros(),
                     Some(limit(j.revolute)),
                 );
-                // A tiny inertial keeps simulators that reject massless links happy.
-                let _ = writeln!(
-                    x,
-                    "  <link name=\"{helper}\"><inertial><mass value=\"0.001\"/><inertia ixx=\"1e-9\" ixy=\"0\" ixz=\"0\" iyy=\"1e-9\" iyz=\"0\" izz=\"1e-9\"/></inertial></link>"
-                );
+                // Simulators reject massless links: the helper gets the floor inertial.
+                let _ = writeln!(x, "  <link name=\"{helper}\">");
+                write_inertial(&mut x, "    ", &helper_inertial(opts), &Vector3::zeros());
+                let _ = writeln!(x, "  </link>");
             }
         }
     }
     let _ = writeln!(x, "</robot>");
-    mesh_files.sort();
-    UrdfBundle {
-        urdf: x,
-        meshes: mesh_files,
-    }
+    x
 }
 
 /// Wavefront OBJ text of `mesh` shifted by −`frame` (positions and per-vertex normals).
@@ -225,6 +311,26 @@ pub fn obj_text(mesh: &TriMesh, frame: &Vector3<f64>) -> String {
     for t in &mesh.triangles {
         let (a, b, c) = (t[0] + 1, t[1] + 1, t[2] + 1);
         let _ = writeln!(s, "f {a}//{a} {b}//{b} {c}//{c}");
+    }
+    s
+}
+
+/// Wavefront OBJ text of `mesh` shifted by −`frame`, positions and faces only (collision
+/// pieces: engines read no normals from them).
+pub fn positions_obj_text(mesh: &TriMesh, frame: &Vector3<f64>) -> String {
+    let mut s = String::with_capacity(mesh.positions.len() * 40 + mesh.triangles.len() * 20);
+    let _ = writeln!(s, "# physnap collision piece, metres, link frame");
+    for p in &mesh.positions {
+        let _ = writeln!(
+            s,
+            "v {} {} {}",
+            p[0] as f64 - frame.x,
+            p[1] as f64 - frame.y,
+            p[2] as f64 - frame.z
+        );
+    }
+    for t in &mesh.triangles {
+        let _ = writeln!(s, "f {} {} {}", t[0] + 1, t[1] + 1, t[2] + 1);
     }
     s
 }

@@ -641,13 +641,20 @@ pub fn media_type(name: &str) -> &'static str {
     match name {
         "model.glb" => "model/gltf-binary",
         "robot.zip" => "application/zip",
+        "model.xml" => "application/xml",
         "object.json" | "ranking.json" => "application/json",
         _ => "application/octet-stream",
     }
 }
 
 /// The artefacts a job produces.
-pub const ARTIFACT_NAMES: [&str; 4] = ["model.glb", "robot.zip", "object.json", "ranking.json"];
+pub const ARTIFACT_NAMES: [&str; 5] = [
+    "model.glb",
+    "model.xml",
+    "robot.zip",
+    "object.json",
+    "ranking.json",
+];
 
 /// Request echo of a spec.
 pub fn request_view(s: &JobSpec) -> RequestView {

@@ -510,13 +510,14 @@ async fn list_artifacts(
     Ok(Json(job.artifacts))
 }
 
-/// Download an artefact: `model.glb` (model/gltf-binary), `robot.zip` (URDF + OBJ meshes),
-/// `object.json` (physnap.object/v1).
+/// Download an artefact: `model.glb` (model/gltf-binary), `model.xml` (MJCF for MuJoCo,
+/// application/xml; its meshes are in `robot.zip`), `robot.zip` (URDF + MJCF + OBJ meshes),
+/// `object.json` (physnap.object/v1), `ranking.json` (physnap.job_ranking/v1).
 #[utoipa::path(
     get, path = "/v1/jobs/{id}/artifacts/{name}", tag = "jobs",
     params(
         ("id" = String, Path, description = "Job id"),
-        ("name" = String, Path, description = "model.glb, robot.zip or object.json")
+        ("name" = String, Path, description = "model.glb, model.xml, robot.zip, object.json or ranking.json")
     ),
     responses(
         (status = 200, description = "The file; ETag is its sha256", body = Vec<u8>, content_type = "application/octet-stream"),

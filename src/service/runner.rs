@@ -17,8 +17,9 @@
 //! Best-of-N: each sample `i` (seed + i) runs on its own; a sample that diverges
 //! ([`EngineError::Diverged`]) is recorded and skipped, and the others are ranked by the score
 //! of `eval::rank` (the CLI's: D_pc / scan diagonal + free-space share + attachment gap /
-//! object diagonal + O_mesh, ascending; samples without a mesh last). The best is exported as
-//! `model.glb`, `robot.zip` and `object.json`; `ranking.json` (`physnap.job_ranking/v1`) lists
+//! object diagonal + O_mesh, ascending; samples without a mesh last). The best is exported
+//! through `export::artefacts` as `model.glb`, `model.xml` (MJCF), `robot.zip` (URDF + MJCF +
+//! meshes) and `object.json`; `ranking.json` (`physnap.job_ranking/v1`) lists
 //! every sample with index, seed, score and its terms, D_pc, O_mesh (surface buried in another
 //! part), its joint repairs (count) and removed parts, whether it diverged
 //! (and why) and which one was exported. If every sample diverges the job fails with
@@ -33,7 +34,7 @@ use crate::engine::guidance::{GuidanceLosses, GuidanceOptions, SdfField};
 use crate::engine::sample::step_events;
 use crate::engine::schedule::Schedule;
 use crate::eval::rank::{RankTerms, sample_terms};
-use crate::export::{ExportError, ExportOptions, glb, urdf, zip_bundle};
+use crate::export::{ExportError, ExportOptions, artefacts, collision_from_visual};
 use crate::graph::{ProjectOptions, project};
 use crate::io::manifest::LoadedModels;
 use crate::mesh::MeshingOptions;
@@ -133,7 +134,8 @@ pub struct Progress {
 /// What a successful job produced: the artefacts' bytes, in a fixed order.
 #[derive(Debug, Clone)]
 pub struct JobOutput {
-    /// `(file name, bytes)`: `model.glb`, `robot.zip`, `object.json`, `ranking.json`.
+    /// `(file name, bytes)`: `model.glb`, `model.xml`, `robot.zip`, `object.json`,
+    /// `ranking.json`.
     pub files: Vec<(String, Vec<u8>)>,
     /// Index of the exported sample.
     pub chosen_sample: u32,
@@ -474,18 +476,25 @@ pub fn run_job(
         meshing: req.meshing,
         ..Default::default()
     };
-    let glb = glb::build(&chosen.object, &chosen.meshes, &opts)?;
-    let bundle = urdf::build(&chosen.object, &chosen.meshes, &opts);
-    let zip = zip_bundle(&bundle)?;
-    let json = crate::io::object_json::to_string_with_repairs(&chosen.object, &chosen.repairs)
-        .into_bytes();
+    let mut art = artefacts(
+        &chosen.object,
+        &chosen.meshes,
+        &collision_from_visual(&chosen.meshes),
+        &chosen.repairs,
+        &opts,
+    )?;
+    for note in &art.notes {
+        tracing::info!(sample = chosen.index, "export: {note}");
+    }
+    let mut files = Vec::with_capacity(5);
+    for name in ["model.glb", "model.xml", "robot.zip", "object.json"] {
+        // `artefacts` always builds these four; a missing one would be a bug there.
+        let bytes = art.take(name).unwrap_or_default();
+        files.push((name.to_string(), bytes));
+    }
+    files.push(("ranking.json".into(), ranking));
     Ok(JobOutput {
-        files: vec![
-            ("model.glb".into(), glb),
-            ("robot.zip".into(), zip),
-            ("object.json".into(), json),
-            ("ranking.json".into(), ranking),
-        ],
+        files,
         chosen_sample: chosen.index as u32,
     })
 }

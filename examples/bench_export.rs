@@ -1,12 +1,15 @@
-//! Benchmark: marching-cubes speed and GLB/URDF export time for an 8-part object.
+//! Benchmark: marching-cubes speed, GLB/URDF export time for an 8-part object, and what the
+//! collision pieces (exact primitive hulls, or the convex decomposition of every mesh) and the
+//! native physics check add.
 //!
 //! Run: `cargo run --release --example bench_export` (figures go to BENCHMARKS.md).
 //! Threads: the rayon global pool (RAYON_NUM_THREADS, default = cores).
 
 use std::time::Instant;
 
+use physnap::export::collision::{self, CollisionOptions};
 use physnap::export::inertial::inertial;
-use physnap::export::{ExportOptions, collision_from_visual, export_dir, glb, mesh_parts, urdf};
+use physnap::export::{ExportOptions, export_dir, glb, mesh_parts, urdf};
 use physnap::mesh::{MeshingOptions, extract_normalised};
 
 #[global_allocator]
@@ -46,9 +49,9 @@ fn main() {
     let obj = physnap::fixtures::eight_part();
     println!("\n## Export of the 8-part fixture (every joint type)");
     println!(
-        "| resolution | mesh all parts (ms) | GLB build (ms) | URDF+OBJ build (ms) | full export_dir incl. fsync (ms) | triangles |"
+        "| resolution | mesh all parts (ms) | GLB build (ms) | URDF+OBJ build (ms) | collision pieces: exact (ms) | collision pieces: decomposed meshes (ms; pieces) | sim check (ms) | full export_dir incl. fsync (ms) | triangles |"
     );
-    println!("|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|");
     let dir = std::env::temp_dir().join("physnap_bench_export");
     for r in [64usize, 128] {
         let opts = ExportOptions {
@@ -57,7 +60,15 @@ fn main() {
         };
         let (t_mesh, meshes) = best_of(3, || mesh_parts(&obj, None, &opts.meshing).unwrap());
         let (t_glb, _) = best_of(3, || glb::build(&obj, &meshes, &opts).unwrap());
-        let collision = collision_from_visual(&meshes);
+        let (t_exact, collision) = best_of(3, || collision::pieces(&obj, &meshes, &opts.collision));
+        let decompose = CollisionOptions {
+            always_decompose: true,
+            ..opts.collision
+        };
+        let (t_dec, decomposed) = best_of(3, || collision::pieces(&obj, &meshes, &decompose));
+        let (t_sim, _) = best_of(3, || {
+            physnap::sim::check(&obj, &decomposed, &opts.sim).unwrap()
+        });
         let inertials: Vec<_> = obj
             .parts
             .iter()
@@ -69,11 +80,15 @@ fn main() {
         });
         let (t_all, _) = best_of(3, || export_dir(&obj, &meshes, &dir, &opts).unwrap());
         let tris: usize = meshes.iter().map(|m| m.triangles.len()).sum();
+        let n: usize = decomposed.iter().map(Vec::len).sum();
         println!(
-            "| {r} | {:.1} | {:.1} | {:.1} | {:.1} | {tris} |",
+            "| {r} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} ({n}) | {:.1} | {:.1} | {tris} |",
             t_mesh * 1e3,
             t_glb * 1e3,
             t_urdf * 1e3,
+            t_exact * 1e3,
+            t_dec * 1e3,
+            t_sim * 1e3,
             t_all * 1e3
         );
     }

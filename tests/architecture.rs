@@ -13,6 +13,7 @@ const TRANSPORT_FREE: &[&str] = &[
     "src/model",
     "src/engine",
     "src/eval",
+    "src/sim.rs",
 ];
 const FORBIDDEN: &[&str] = &[
     "serde", "axum", "tonic", "prost", "utoipa", "tokio", "rusqlite", "reqwest",

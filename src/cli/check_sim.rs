@@ -13,7 +13,8 @@ use physnap::export::collision::{CollisionOptions, part_pieces};
 use physnap::export::names::safe_unique;
 use physnap::export::urdf::link_frames;
 use physnap::mesh::{TriMesh, obj};
-use physnap::sim::{SimOptions, check};
+use physnap::object::ArticulatedObject;
+use physnap::sim::{SimOptions, SimReport, check};
 use std::path::{Path, PathBuf};
 
 #[derive(Args, Debug)]
@@ -81,6 +82,32 @@ pub(crate) fn read_pieces(
     Ok((decomposed, true))
 }
 
+/// One line: the verdict, the deepest contacts and where the worst one is.
+pub(crate) fn summary(obj: &ArticulatedObject, r: &SimReport) -> String {
+    let verdict = if r.clean {
+        "sim-clean"
+    } else {
+        "NOT sim-clean"
+    };
+    let mut s = format!(
+        "{verdict}: deepest contact {:.4} m at rest, {:.4} m along the joints (limit {} m, {} states per joint)",
+        r.rest_depth, r.sweep_depth, r.options.depth, r.options.states
+    );
+    if let Some(w) = r.worst.as_ref().filter(|w| w.depth > 0.0) {
+        let name = |p: usize| obj.parts.get(p).map_or("?", |p| p.name.as_str());
+        let at = match (w.joint, w.fraction) {
+            (Some(k), Some(f)) => format!(
+                "with joint {} at {:.0} % of its range",
+                obj.joints.get(k).map_or("?", |j| name(j.child)),
+                100.0 * f
+            ),
+            _ => "at rest".into(),
+        };
+        s += &format!("; worst: {} and {} {at}", name(w.pair[0]), name(w.pair[1]));
+    }
+    s
+}
+
 pub(crate) fn check_sim(a: CheckSimArgs) -> anyhow::Result<()> {
     let opts = SimOptions {
         depth: a.depth,
@@ -103,36 +130,18 @@ pub(crate) fn check_sim(a: CheckSimArgs) -> anyhow::Result<()> {
         );
     }
     let report = check(&obj, &pieces, &opts)?;
+    let n: usize = pieces.iter().map(Vec::len).sum();
     if a.json {
         let mut doc = physnap::io::verdict::sim_json(&obj, &report);
         doc["format"] = "physnap.sim_report/v1".into();
         println!("{doc}");
     } else {
-        let n: usize = pieces.iter().map(Vec::len).sum();
         println!(
-            "{}: {} parts, {} collision pieces, deepest contact {:.4} m at rest, {:.4} m along the joints (limit {} m, {} states per joint)",
+            "{}: {} parts, {n} collision pieces; {}",
             a.dir.display(),
             obj.parts.len(),
-            n,
-            report.rest_depth,
-            report.sweep_depth,
-            opts.depth,
-            opts.states
+            summary(&obj, &report)
         );
-        if let Some(w) = &report.worst {
-            let at = match (w.joint, w.fraction) {
-                (Some(k), Some(f)) => format!(
-                    "with joint {} at {:.0} % of its range",
-                    obj.parts[obj.joints[k].child].name,
-                    100.0 * f
-                ),
-                _ => "at rest".into(),
-            };
-            println!(
-                "deepest: {} and {} {at}, {:.4} m",
-                obj.parts[w.pair[0]].name, obj.parts[w.pair[1]].name, w.depth
-            );
-        }
     }
     if !report.clean {
         bail!(
@@ -140,9 +149,6 @@ pub(crate) fn check_sim(a: CheckSimArgs) -> anyhow::Result<()> {
             report.worst_depth(),
             opts.depth
         );
-    }
-    if !a.json {
-        println!("sim-clean");
     }
     Ok(())
 }

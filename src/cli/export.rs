@@ -28,6 +28,26 @@ pub(crate) struct ExportArgs {
     /// URDF joint velocity limit written on every movable joint.
     #[arg(long, env = "PHYSNAP_JOINT_VELOCITY", default_value_t = 1.0)]
     pub(crate) velocity: f64,
+
+    /// Viscous damping of every movable joint (URDF <dynamics damping>, MJCF damping).
+    #[arg(long, env = "PHYSNAP_JOINT_DAMPING", default_value_t = 0.1)]
+    pub(crate) damping: f64,
+
+    /// Density (kg/m³) of every part, for masses and inertias.
+    #[arg(long, env = "PHYSNAP_DENSITY", default_value_t = physnap::export::inertial::InertialOptions::default().density)]
+    pub(crate) density: f64,
+
+    /// Most convex collision pieces per part (1..=64).
+    #[arg(long, env = "PHYSNAP_COLLISION_PIECES", default_value_t = physnap::mesh::convex::DecompositionOptions::default().max_pieces)]
+    pub(crate) collision_pieces: usize,
+
+    /// Most vertices per collision piece (8..=256).
+    #[arg(long, env = "PHYSNAP_COLLISION_VERTICES", default_value_t = physnap::mesh::convex::DecompositionOptions::default().max_vertices)]
+    pub(crate) collision_vertices: usize,
+
+    /// Voxels along a part's longest side for the convex decomposition (16..=128).
+    #[arg(long, env = "PHYSNAP_COLLISION_RESOLUTION", default_value_t = physnap::mesh::convex::DecompositionOptions::default().resolution)]
+    pub(crate) collision_resolution: u32,
 }
 
 pub(crate) fn export(a: ExportArgs) -> anyhow::Result<()> {
@@ -39,9 +59,19 @@ pub(crate) fn export(a: ExportArgs) -> anyhow::Result<()> {
         },
         effort: a.effort,
         velocity: a.velocity,
+        damping: a.damping,
         ..ExportOptions::default()
     };
+    let mut opts = opts;
+    opts.inertial.density = a.density;
+    let d = &mut opts.collision.decomposition;
+    (d.max_pieces, d.max_vertices, d.resolution) = (
+        a.collision_pieces,
+        a.collision_vertices,
+        a.collision_resolution,
+    );
     opts.meshing.validate()?;
+    opts.validate()?;
     let t0 = std::time::Instant::now();
     let meshes = mesh_parts(&obj, None, &opts.meshing)?;
     let t_mesh = t0.elapsed();
@@ -56,6 +86,7 @@ pub(crate) fn export(a: ExportArgs) -> anyhow::Result<()> {
         "exported {}",
         obj.name
     );
+    println!("{}", crate::cli::check_sim::summary(&obj, &report.sim));
     for p in &report.empty_parts {
         tracing::warn!(part = %p, "part mesh is empty; it has no geometry in the outputs");
     }

@@ -430,6 +430,10 @@ pub(crate) fn generate(a: GenerateArgs) -> anyhow::Result<()> {
             g.object.joints.len(),
             g.seed
         );
+        println!(
+            "  {}",
+            crate::cli::check_sim::summary(&g.object, &report.sim)
+        );
         for note in &report.notes {
             println!("  note: {note}");
         }

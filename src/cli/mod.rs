@@ -6,7 +6,7 @@
 //! a shell, a container or a compose file. Errors from the library layers are reported once,
 //! here, with their full cause chain.
 
-mod check_sim;
+pub(crate) mod check_sim;
 mod client;
 mod data;
 mod eval;

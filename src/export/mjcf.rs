@@ -206,7 +206,7 @@ impl BodyWriter<'_> {
 mod tests {
     use super::*;
     use crate::export::inertial::{InertialOptions, inertial};
-    use crate::export::{collision_from_visual, urdf};
+    use crate::export::{collision, urdf};
     use crate::mesh::primitives::part_primitive_mesh;
 
     fn parts_of(obj: &ArticulatedObject) -> (Vec<TriMesh>, Vec<Vec<TriMesh>>, Vec<Inertial>) {
@@ -221,7 +221,7 @@ mod tests {
             .zip(&meshes)
             .map(|(p, m)| inertial(p, m, &InertialOptions::default()))
             .collect();
-        let collision = collision_from_visual(&meshes);
+        let collision = collision::pieces(&obj, &meshes, &Default::default());
         (meshes, collision, inertials)
     }
 
@@ -251,7 +251,8 @@ mod tests {
                 .contains("<joint name=\"joint_lid_turn\" type=\"hinge\"")
         );
         assert!(!m.xml.contains("screw_helper") && u.urdf.contains("lid_screw_helper"));
-        assert_eq!(m.xml.matches("group=\"3\"").count(), obj.parts.len());
+        let pieces: usize = collision.iter().map(Vec::len).sum();
+        assert_eq!(m.xml.matches("group=\"3\"").count(), pieces);
         assert_eq!(m.xml.matches("contype=\"0\"").count(), obj.parts.len());
         // The drawer sits at its joint origin relative to the body's frame (the object frame).
         assert!(

@@ -16,7 +16,9 @@
 //! ```
 //!
 //! Meshes come from [`mesh_parts`] (marching cubes over each part's SDF, object frame at rest);
-//! collision pieces, until a convex decomposition provides them, from [`collision_from_visual`].
+//! collision pieces from [`collision::pieces`] (exact primitive hulls, or a convex
+//! decomposition of the mesh); [`artefacts`] runs the physics check ([`crate::sim`]) on them
+//! and writes its verdict into `object.json` (`sim`).
 //!
 //! Tiny parts: a part whose mass before the floor ([`inertial::mass_properties`]) is below
 //! [`inertial::InertialOptions::min_mass`] is too small to matter to a simulation. When it is
@@ -96,6 +98,10 @@ pub struct ExportOptions {
     pub friction: f64,
     /// Density and floors of the part inertials.
     pub inertial: InertialOptions,
+    /// How each part's convex collision pieces are made ([`collision`]).
+    pub collision: collision::CollisionOptions,
+    /// The physics check run on them, reported in `object.json` (`crate::sim`).
+    pub sim: crate::sim::SimOptions,
     /// Duration of one sweep lower → upper in the GLB animations (seconds).
     pub sweep_seconds: f32,
 }
@@ -109,6 +115,8 @@ impl Default for ExportOptions {
             damping: 0.1,
             friction: 0.0,
             inertial: InertialOptions::default(),
+            collision: collision::CollisionOptions::default(),
+            sim: crate::sim::SimOptions::default(),
             sweep_seconds: 2.0,
         }
     }
@@ -135,7 +143,9 @@ impl ExportOptions {
                 return Err(CoreError::invalid(field, limit, v));
             }
         }
-        self.inertial.validate()
+        self.inertial.validate()?;
+        self.collision.validate()?;
+        self.sim.validate()
     }
 }
 
@@ -211,6 +221,8 @@ pub struct ExportReport {
     pub empty_parts: Vec<String>,
     /// What the export decided about tiny parts and inertials (module docs).
     pub notes: Vec<ExportNote>,
+    /// The physics check of the collision pieces written (`crate::sim`).
+    pub sim: crate::sim::SimReport,
 }
 
 /// Every artefact of one object, in memory.
@@ -221,6 +233,8 @@ pub struct Artefacts {
     pub files: Vec<(String, Vec<u8>)>,
     /// What the export decided about tiny parts and inertials.
     pub notes: Vec<ExportNote>,
+    /// The physics check of the collision pieces written (`crate::sim`; also in object.json).
+    pub sim: crate::sim::SimReport,
 }
 
 impl Artefacts {
@@ -240,23 +254,6 @@ impl Artefacts {
 }
 
 pub use crate::mesh::mesh_parts;
-
-/// The fallback collision geometry: each part's visual mesh as its single collision piece
-/// (no piece for an empty mesh). Engines collide with the convex hull of a mesh, so a concave
-/// part (a drawer, a cabinet body) collides as a solid block; this stands in until a convex
-/// decomposition provides real pieces.
-pub fn collision_from_visual(meshes: &[TriMesh]) -> Vec<Vec<TriMesh>> {
-    meshes
-        .iter()
-        .map(|m| {
-            if m.is_empty() {
-                vec![]
-            } else {
-                vec![m.clone()]
-            }
-        })
-        .collect()
-}
 
 /// Build every artefact of `obj` in memory. `meshes[p]` is part p's visual mesh and
 /// `collision[p]` its convex collision pieces, object frame at rest, one entry per part;
@@ -299,6 +296,8 @@ pub fn artefacts(
     );
     let mesh_files = urdf::mesh_files(&sim.object, &sim.names, &sim.meshes, &sim.collision);
     let zip = zip_bundle(&urdf, &mjcf, &mesh_files)?;
+    let report = crate::sim::check(&sim.object, &sim.collision, &opts.sim)?;
+    let sim_doc = crate::io::verdict::sim_json(&sim.object, &report);
     let mut files = vec![
         ("model.glb".to_string(), glb::build(obj, meshes, opts)?),
         ("robot.urdf".to_string(), urdf.into_bytes()),
@@ -312,11 +311,12 @@ pub fn artefacts(
     files.push(("robot.zip".to_string(), zip));
     files.push((
         "object.json".to_string(),
-        crate::io::object_json::to_string_with_repairs(obj, repairs).into_bytes(),
+        crate::io::object_json::to_string_with(obj, repairs, Some(sim_doc)).into_bytes(),
     ));
     Ok(Artefacts {
         files,
         notes: sim.notes,
+        sim: report,
     })
 }
 
@@ -436,8 +436,8 @@ fn append(a: &mut TriMesh, b: &TriMesh) {
     );
 }
 
-/// Write all artefacts for `obj` into `out` (created if missing), with
-/// [`collision_from_visual`] as the collision geometry.
+/// Write all artefacts for `obj` into `out` (created if missing), with the collision pieces of
+/// [`collision::pieces`].
 pub fn export_dir(
     obj: &ArticulatedObject,
     meshes: &[TriMesh],
@@ -456,14 +456,8 @@ pub fn export_dir_with_repairs(
     out: &Path,
     opts: &ExportOptions,
 ) -> Result<ExportReport, ExportError> {
-    export_dir_with_collision(
-        obj,
-        meshes,
-        &collision_from_visual(meshes),
-        repairs,
-        out,
-        opts,
-    )
+    let pieces = collision::pieces(obj, meshes, &opts.collision);
+    export_dir_with_collision(obj, meshes, &pieces, repairs, out, opts)
 }
 
 /// Write [`artefacts`] into `out` (created if missing), each file atomically.
@@ -496,6 +490,7 @@ pub fn export_dir_with_collision(
             .map(|(p, _)| p.name.clone())
             .collect(),
         notes: art.notes,
+        sim: art.sim,
     })
 }
 
@@ -587,7 +582,12 @@ mod tests {
             .map(|p| part_primitive_mesh(p).unwrap())
             .collect();
         let opts = InertialOptions::default();
-        let sim = SimModel::new(&obj, &meshes, &collision_from_visual(&meshes), &opts);
+        let sim = SimModel::new(
+            &obj,
+            &meshes,
+            &collision::pieces(&obj, &meshes, &Default::default()),
+            &opts,
+        );
         // The knob and the pin go into their parents; the bracket (it has a child) and the
         // flap (it moves) keep their links with the floor mass.
         assert_eq!(sim.names, ["body", "bracket", "flap"]);
@@ -638,7 +638,7 @@ mod tests {
         let art = artefacts(
             &obj,
             &meshes,
-            &collision_from_visual(&meshes),
+            &collision::pieces(&obj, &meshes, &Default::default()),
             &[],
             &ExportOptions::default(),
         )
@@ -672,11 +672,14 @@ mod tests {
             .map(|p| part_primitive_mesh(p).unwrap())
             .collect();
         let opts = ExportOptions::default();
-        let art = artefacts(&obj, &meshes, &collision_from_visual(&meshes), &[], &opts).unwrap();
+        let pieces = collision::pieces(&obj, &meshes, &Default::default());
+        let art = artefacts(&obj, &meshes, &pieces, &[], &opts).unwrap();
         let names: Vec<&str> = art.files.iter().map(|(n, _)| n.as_str()).collect();
         assert_eq!(names[..3], ["model.glb", "robot.urdf", "model.xml"]);
         assert_eq!(names[names.len() - 2..], ["robot.zip", "object.json"]);
-        assert_eq!(names.len(), 5 + 2 * obj.parts.len());
+        let n: usize = pieces.iter().map(Vec::len).sum();
+        assert_eq!(names.len(), 5 + obj.parts.len() + n);
+        assert!(art.sim.clean, "{:?}", art.sim);
         let e = artefacts(&obj, &meshes, &[], &[], &opts)
             .unwrap_err()
             .to_string();

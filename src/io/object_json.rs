@@ -171,15 +171,15 @@ pub fn to_string_with_repairs(obj: &ArticulatedObject, repairs: &[Repair]) -> St
     to_string_with(obj, repairs, None)
 }
 
-/// [`to_string_with_repairs`] with the export's physics check as `"sim"` (see
+/// [`to_string_with_repairs`] with the export's physics check as `"sim"` (the document of
 /// [`crate::io::verdict::sim_json`]).
 pub fn to_string_with(
     obj: &ArticulatedObject,
     repairs: &[Repair],
-    sim: Option<&crate::sim::SimReport>,
+    sim: Option<serde_json::Value>,
 ) -> String {
     let mut doc = to_doc(obj);
-    doc.sim = sim.map(|r| crate::io::verdict::sim_json(obj, r));
+    doc.sim = sim;
     doc.repairs = repairs
         .iter()
         .map(|r| RepairDoc {

@@ -135,6 +135,7 @@ fn exact_hull(pts: &[Vector]) -> Option<(Vec<Vector>, Vec<[u32; 3]>)> {
 fn flat_or_hull(pts: &[Vector]) -> Option<(Vec<Vector>, Vec<[u32; 3]>)> {
     if let Some(h) = scaled_hull(pts)
         && !flat(&h.0, volume_of(&h.0, &h.1).abs())
+        && !thin(&h.0)
     {
         return Some(h);
     }
@@ -169,6 +170,19 @@ fn scaled_hull(pts: &[Vector]) -> Option<(Vec<Vector>, Vec<[u32; 3]>)> {
         return None;
     }
     Some((verts.iter().map(|v| *v * e + mid).collect(), tris))
+}
+
+/// Whether the points span less than [`MIN_THICKNESS`] along some axis.
+fn thin(verts: &[Vector]) -> bool {
+    let (mut lo, mut hi) = (
+        Vector::splat(f32::INFINITY),
+        Vector::splat(f32::NEG_INFINITY),
+    );
+    for v in verts {
+        lo = lo.min(*v);
+        hi = hi.max(*v);
+    }
+    (hi - lo).min_element() < MIN_THICKNESS
 }
 
 /// Whether a hull of `volume` is thinner than a tenth of [`MIN_THICKNESS`] over its extent.
@@ -342,6 +356,27 @@ mod tests {
         let h = hull(&m.positions, 48).unwrap();
         assert_eq!(h.positions.len(), 8);
         assert!((volume(&h) - 0.1).abs() < 1e-6, "{}", volume(&h));
+    }
+
+    #[test]
+    fn specks_and_rods_get_a_thickness_in_every_axis() {
+        let speck = [
+            [0.1, 0.2, 0.3],
+            [0.1 + 1e-7, 0.2, 0.3],
+            [0.1, 0.2 + 1e-7, 0.3 + 1e-7],
+            [0.1, 0.2, 0.3 + 1e-6],
+        ];
+        let h = hull(&speck, 48).unwrap();
+        let (lo, hi) = h.bounds().unwrap();
+        for a in 0..3 {
+            assert!(
+                hi[a] - lo[a] >= MIN_THICKNESS * 0.99,
+                "{a}: {:?} {:?}",
+                lo,
+                hi
+            );
+        }
+        assert!(volume(&h) > 1e-11, "{}", volume(&h));
     }
 
     #[test]

@@ -405,9 +405,32 @@ pub fn decompose(mesh: &TriMesh, opts: &CutOptions) -> Vec<Vec<[f32; 3]>> {
         };
         cells.splice(w..=w, halves);
     }
-    cells
-        .into_iter()
-        .map(|c| c.points)
-        .filter(|p| !p.is_empty())
-        .collect()
+    // Specks (a cut grazing the surface leaves a cell of a few clipped points) are dropped:
+    // they add a piece and no shape.
+    let span = |p: &[[f32; 3]]| {
+        (0..3)
+            .map(|a| {
+                let (lo, hi) = p
+                    .iter()
+                    .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), v| {
+                        (l.min(v[a]), h.max(v[a]))
+                    });
+                hi - lo
+            })
+            .fold(0.0f32, f32::max)
+    };
+    let speck = (0.5 * g.h) as f32;
+    let mut out: Vec<Vec<[f32; 3]>> = cells
+        .iter()
+        .map(|c| c.points.clone())
+        .filter(|p| !p.is_empty() && span(p) >= speck)
+        .collect();
+    if out.is_empty() {
+        out = cells
+            .into_iter()
+            .map(|c| c.points)
+            .filter(|p| !p.is_empty())
+            .collect();
+    }
+    out
 }

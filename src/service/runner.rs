@@ -34,7 +34,7 @@ use crate::engine::guidance::{GuidanceLosses, GuidanceOptions, SdfField};
 use crate::engine::sample::step_events;
 use crate::engine::schedule::Schedule;
 use crate::eval::rank::{RankTerms, sample_terms};
-use crate::export::{ExportError, ExportOptions, artefacts, collision_from_visual};
+use crate::export::{ExportError, ExportOptions, artefacts, collision};
 use crate::graph::{ProjectOptions, project};
 use crate::io::manifest::LoadedModels;
 use crate::mesh::MeshingOptions;
@@ -479,7 +479,7 @@ pub fn run_job(
     let mut art = artefacts(
         &chosen.object,
         &chosen.meshes,
-        &collision_from_visual(&chosen.meshes),
+        &collision::pieces(&chosen.object, &chosen.meshes, &opts.collision),
         &chosen.repairs,
         &opts,
     )?;

@@ -539,7 +539,20 @@ fn job(
         ..Default::default()
     };
     match export_dir_with_repairs(&g.object, &g.meshes, &g.repairs, dir, &opts) {
-        Ok(_) => {
+        Ok(report) => {
+            // The same check on each whole mesh's hull: what an engine makes of a part without
+            // collision pieces (EVALUATION compares the two).
+            let hulls = physnap::export::collision::hulls_only(
+                &g.meshes,
+                physnap::mesh::convex::MAX_VERTICES,
+            );
+            let on_hulls = physnap::sim::check(&g.object, &hulls, &opts.sim).ok();
+            r.native = Some(physnap::eval::real::NativeSim {
+                clean: report.sim.clean,
+                worst_depth: report.sim.worst_depth(),
+                hulls_clean: on_hulls.is_some_and(|h| h.clean),
+                hulls_worst_depth: on_hulls.map_or(f64::NAN, |h| h.worst_depth()),
+            });
             let m = object_metrics(&g.object, &g.meshes, &gt.object, &gt.meshes, seed);
             if m.chamfer_diag.is_finite() {
                 r.error = None;

@@ -456,14 +456,17 @@ fn a_camera_turns_on_free_space_and_ranking_json_lists_every_term() {
             "free",
             "attach_per_object_diagonal",
             "o_mesh",
+            "sim_depth_per_object_diagonal",
         ] {
             assert!(s["terms"][t].is_number(), "{t} missing in {s}");
         }
+        assert!(s["terms"]["sim"]["clean"].is_boolean(), "{s}");
         let sum: f64 = [
             "d_pc_per_scan_diagonal",
             "free",
             "attach_per_object_diagonal",
             "o_mesh",
+            "sim_depth_per_object_diagonal",
         ]
         .iter()
         .map(|t| s["terms"][t].as_f64().unwrap())
@@ -526,5 +529,95 @@ fn bad_cameras_name_the_flag_the_limit_and_the_value() {
     assert!(
         err.contains("--camera") && err.contains("--points"),
         "{err}"
+    );
+}
+
+#[test]
+fn check_sim_passes_the_example_and_fails_a_jammed_drawer() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("cab");
+    let args = |obj: &str, out: &Path| {
+        physnap(
+            &["export", "--object", obj, "--out", out.to_str().unwrap()],
+            &[],
+        )
+    };
+    let o = args(EXAMPLE, &out);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("sim-clean"), "{}", stderr(&o));
+    assert!(out.join("model.xml").is_file() && out.join("meshes/body_collision_0.obj").is_file());
+    let o = physnap(&["check-sim", out.to_str().unwrap()], &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("sim-clean"));
+    let o = physnap(&["check-sim", out.to_str().unwrap(), "--json"], &[]);
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(doc["format"], "physnap.sim_report/v1");
+    assert_eq!(doc["clean"], true);
+    let written: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("object.json")).unwrap()).unwrap();
+    assert_eq!(written["sim"]["clean"], true, "{written}");
+
+    // The drawer slides the wrong way, through the body's back wall.
+    let mut obj: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(EXAMPLE).unwrap()).unwrap();
+    let drawer = obj["joints"]
+        .as_array_mut()
+        .unwrap()
+        .iter_mut()
+        .find(|j| j["type"] == "prismatic")
+        .unwrap();
+    drawer["axis"] = serde_json::json!([1.0, 0.0, 0.0]);
+    let jammed = write(dir.path(), "jammed.json", &obj.to_string());
+    let out2 = dir.path().join("jammed");
+    let o = args(&jammed, &out2);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("NOT sim-clean"), "{}", stderr(&o));
+    let o = physnap(&["check-sim", out2.to_str().unwrap()], &[]);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(
+        e.contains("not sim-clean") && e.contains("exceeds 0.005 m"),
+        "{e}"
+    );
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("drawer"),
+        "the worst pair is named"
+    );
+
+    // An export without collision pieces (written before they existed) is decomposed.
+    for e in std::fs::read_dir(out.join("meshes")).unwrap() {
+        let p = e.unwrap().path();
+        if p.to_string_lossy().contains("_collision_") {
+            std::fs::remove_file(p).unwrap();
+        }
+    }
+    let o = physnap(
+        &["check-sim", out.to_str().unwrap()],
+        &[("PHYSNAP_LOG", "warn")],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("decomposed its visual meshes"),
+        "{}",
+        stderr(&o)
+    );
+
+    // Bad input names the field, the limit and the value.
+    let o = physnap(&["check-sim", out.to_str().unwrap(), "--states", "0"], &[]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("sim.states") && stderr(&o).contains("1..=101"),
+        "{}",
+        stderr(&o)
+    );
+    let o = physnap(
+        &["check-sim", dir.path().join("nowhere").to_str().unwrap()],
+        &[],
+    );
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("object.json") && stderr(&o).contains("export directory"),
+        "{}",
+        stderr(&o)
     );
 }

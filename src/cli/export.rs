@@ -86,7 +86,8 @@ pub(crate) fn export(a: ExportArgs) -> anyhow::Result<()> {
         "exported {}",
         obj.name
     );
-    println!("{}", crate::cli::check_sim::summary(&obj, &report.sim));
+    // stdout is the file list scripts read; the verdict goes with the logs.
+    eprintln!("{}", crate::cli::check_sim::summary(&obj, &report.sim));
     for p in &report.empty_parts {
         tracing::warn!(part = %p, "part mesh is empty; it has no geometry in the outputs");
     }

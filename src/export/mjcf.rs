@@ -221,7 +221,7 @@ mod tests {
             .zip(&meshes)
             .map(|(p, m)| inertial(p, m, &InertialOptions::default()))
             .collect();
-        let collision = collision::pieces(&obj, &meshes, &Default::default());
+        let collision = collision::pieces(obj, &meshes, &Default::default());
         (meshes, collision, inertials)
     }
 

@@ -197,7 +197,7 @@ fn flat(verts: &[Vector], volume: f32) -> bool {
     }
     let e = hi - lo;
     let area = (e.x * e.y).max(e.y * e.z).max(e.x * e.z);
-    !(volume > 0.1 * MIN_THICKNESS * area)
+    volume.is_nan() || volume <= 0.1 * MIN_THICKNESS * area
 }
 
 fn volume_of(verts: &[Vector], tris: &[[u32; 3]]) -> f32 {

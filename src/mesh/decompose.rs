@@ -63,7 +63,7 @@ impl Grid {
     fn new(mesh: &TriMesh, resolution: u32) -> Option<Grid> {
         let (lo, hi) = mesh.bounds()?;
         let ext = (0..3).map(|a| (hi[a] - lo[a]) as f64).fold(0.0, f64::max);
-        if !(ext > 0.0) {
+        if ext.is_nan() || ext <= 0.0 {
             return None;
         }
         let h = ext / resolution as f64;

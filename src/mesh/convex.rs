@@ -16,7 +16,7 @@
 use nalgebra::Isometry3;
 use parry3d::math::{Pose, Vector};
 use parry3d::query::contact::contact_support_map_support_map;
-use parry3d::shape::ConvexPolyhedron;
+use parry3d::shape::SupportMap;
 use parry3d::transformation::try_convex_hull;
 
 use super::TriMesh;
@@ -286,22 +286,37 @@ pub fn decompose(mesh: &TriMesh, opts: &DecompositionOptions) -> Vec<TriMesh> {
         .collect()
 }
 
-/// A convex piece ready for contact queries.
+/// A convex piece ready for contact queries: its hull's vertices, queried as a support map
+/// (the farthest vertex along a direction), which is all GJK and EPA need; no face topology is
+/// involved, so no degenerate hull can trip a query.
 #[derive(Debug, Clone)]
 pub struct Convex {
-    shape: ConvexPolyhedron,
+    verts: Vec<Vector>,
     lo: [f32; 3],
     hi: [f32; 3],
+}
+
+impl SupportMap for Convex {
+    fn local_support_point(&self, dir: Vector) -> Vector {
+        let mut best = self.verts[0];
+        let mut d = best.dot(dir);
+        for v in &self.verts[1..] {
+            let e = v.dot(dir);
+            if e > d {
+                (best, d) = (*v, e);
+            }
+        }
+        best
+    }
 }
 
 impl Convex {
     /// The piece of a convex mesh (its hull is taken; `None` when degenerate).
     pub fn new(mesh: &TriMesh) -> Option<Convex> {
         let pts: Vec<Vector> = mesh.positions.iter().map(|&p| vec(p)).collect();
-        let (verts, tris) = exact_hull(&pts)?;
+        let (verts, _) = exact_hull(&pts)?;
         let (lo, hi) = mesh.bounds()?;
-        let shape = ConvexPolyhedron::from_convex_mesh(verts, &tris)?;
-        Some(Convex { shape, lo, hi })
+        Some(Convex { verts, lo, hi })
     }
 
     /// Corners of the piece's bounding box in its own frame.
@@ -323,7 +338,7 @@ fn pose(iso: &Isometry3<f64>) -> Pose {
 /// piece `b` placed by `pb`: the shortest translation that separates them (GJK + EPA).
 pub fn penetration(a: &Convex, pa: &Isometry3<f64>, b: &Convex, pb: &Isometry3<f64>) -> f64 {
     let rel = pose(pa).inverse() * pose(pb);
-    match contact_support_map_support_map(&rel, &a.shape, &b.shape, 0.0) {
+    match contact_support_map_support_map(&rel, a, b, 0.0) {
         Some(c) if c.dist < 0.0 => -c.dist as f64,
         _ => 0.0,
     }

@@ -150,18 +150,22 @@ fn flat_or_hull(pts: &[Vector]) -> Option<(Vec<Vector>, Vec<[u32; 3]>)> {
     scaled_hull(&thick)
 }
 
+/// The corners of the points' bounding box.
+fn bounds_of(verts: &[Vector]) -> (Vector, Vector) {
+    verts.iter().fold(
+        (
+            Vector::splat(f32::INFINITY),
+            Vector::splat(f32::NEG_INFINITY),
+        ),
+        |(lo, hi), v| (lo.min(*v), hi.max(*v)),
+    )
+}
+
 /// parry's hull computed with every axis scaled to the same extent (an affine map keeps the
 /// hull's vertices and faces), so that a 1 mm panel a metre wide is not flattened by parry's
 /// relative tolerance; vertices are returned in the original frame.
 fn scaled_hull(pts: &[Vector]) -> Option<(Vec<Vector>, Vec<[u32; 3]>)> {
-    let (mut lo, mut hi) = (
-        Vector::splat(f32::INFINITY),
-        Vector::splat(f32::NEG_INFINITY),
-    );
-    for v in pts {
-        lo = lo.min(*v);
-        hi = hi.max(*v);
-    }
+    let (lo, hi) = bounds_of(pts);
     let mid = (lo + hi) * 0.5;
     let e = (hi - lo).max(Vector::splat(1e-9));
     let scaled: Vec<Vector> = pts.iter().map(|p| (*p - mid) / e).collect();
@@ -174,27 +178,13 @@ fn scaled_hull(pts: &[Vector]) -> Option<(Vec<Vector>, Vec<[u32; 3]>)> {
 
 /// Whether the points span less than [`MIN_THICKNESS`] along some axis.
 fn thin(verts: &[Vector]) -> bool {
-    let (mut lo, mut hi) = (
-        Vector::splat(f32::INFINITY),
-        Vector::splat(f32::NEG_INFINITY),
-    );
-    for v in verts {
-        lo = lo.min(*v);
-        hi = hi.max(*v);
-    }
+    let (lo, hi) = bounds_of(verts);
     (hi - lo).min_element() < MIN_THICKNESS
 }
 
 /// Whether a hull of `volume` is thinner than a tenth of [`MIN_THICKNESS`] over its extent.
 fn flat(verts: &[Vector], volume: f32) -> bool {
-    let (mut lo, mut hi) = (
-        Vector::splat(f32::INFINITY),
-        Vector::splat(f32::NEG_INFINITY),
-    );
-    for v in verts {
-        lo = lo.min(*v);
-        hi = hi.max(*v);
-    }
+    let (lo, hi) = bounds_of(verts);
     let e = hi - lo;
     let area = (e.x * e.y).max(e.y * e.z).max(e.x * e.z);
     volume.is_nan() || volume <= 0.1 * MIN_THICKNESS * area

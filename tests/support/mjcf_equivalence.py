@@ -38,6 +38,10 @@ import os
 import re
 import sys
 
+# The URDF is loaded exactly as the sim-clean check loads it (scripts/sim_check.py).
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "scripts"))
+from sim_check import urdf_for_mujoco  # noqa: E402
+
 FRACTIONS = [0.0, 0.25, 0.5, 0.75, 1.0]
 
 
@@ -48,22 +52,6 @@ def load_mujoco():
         sys.stderr.write(f"mjcf_equivalence.py: cannot import mujoco with {sys.executable}: {e}\n")
         sys.exit(3)
     return mujoco
-
-
-def urdf_for_mujoco(path):
-    """The URDF text with the <mujoco><compiler/></mujoco> element sim_check.py injects."""
-    with open(path, encoding="utf-8") as f:
-        text = f.read()
-    folder = os.path.dirname(os.path.abspath(path))
-    ext = (
-        '<mujoco><compiler meshdir="{}" strippath="false" discardvisual="true" '
-        'fusestatic="false"/></mujoco>'.format(folder.replace('"', "&quot;"))
-    )
-    text = re.sub(r"<mujoco>.*?</mujoco>", "", text, flags=re.S)
-    m = re.search(r"<robot\b[^>]*>", text)
-    if m is None:
-        raise ValueError("no <robot> element")
-    return text[: m.end()] + ext + text[m.end():]
 
 
 def names(mujoco, model, kind, n):

@@ -58,7 +58,7 @@ fn check_urdf_matches(obj: &ArticulatedObject, urdf_path: &Path) {
         if link.name.ends_with("_screw_helper") {
             continue;
         }
-        // The visual mesh and its fallback collision piece, both on disk.
+        // The visual mesh and its convex collision pieces, all on disk.
         let file = |g: &urdf_rs::Geometry| match g {
             urdf_rs::Geometry::Mesh { filename, .. } => filename.clone(),
             other => panic!("{}: {other:?}", link.name),
@@ -68,10 +68,12 @@ fn check_urdf_matches(obj: &ArticulatedObject, urdf_path: &Path) {
             file(&link.visual[0].geometry),
             format!("meshes/{}.obj", link.name)
         );
-        assert_eq!(link.collision.len(), 1, "{}", link.name);
-        let piece = file(&link.collision[0].geometry);
-        assert_eq!(piece, format!("meshes/{}_collision_0.obj", link.name));
-        assert!(dir.join(&piece).is_file(), "{piece}");
+        assert!(!link.collision.is_empty(), "{}", link.name);
+        for (k, c) in link.collision.iter().enumerate() {
+            let piece = file(&c.geometry);
+            assert_eq!(piece, format!("meshes/{}_collision_{k}.obj", link.name));
+            assert!(dir.join(&piece).is_file(), "{piece}");
+        }
     }
     for j in &obj.joints {
         let child = &obj.parts[j.child].name;
@@ -239,8 +241,11 @@ fn zip_bundle_holds_urdf_and_meshes_and_export_is_deterministic() {
             assert!(names.contains(&f), "{f} not in {names:?}");
         }
     }
-    // Nothing but the two documents and the meshes, sorted as written.
-    assert_eq!(names.len(), 2 + 2 * obj.parts.len(), "{names:?}");
+    // Nothing but the two documents and the meshes (one visual, and the collision pieces).
+    let meshes = names.iter().filter(|n| n.starts_with("meshes/")).count();
+    let pieces = names.iter().filter(|n| n.contains("_collision_")).count();
+    assert_eq!(names.len(), 2 + meshes, "{names:?}");
+    assert_eq!(meshes, obj.parts.len() + pieces, "{names:?}");
     let out = tempfile::tempdir().unwrap();
     zip.extract(out.path()).unwrap();
     check_urdf_matches(&obj, &out.path().join("robot.urdf"));

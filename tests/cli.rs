@@ -621,3 +621,48 @@ fn check_sim_passes_the_example_and_fails_a_jammed_drawer() {
         stderr(&o)
     );
 }
+
+#[test]
+fn bad_collision_and_inertial_flags_name_the_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    for (flag, value, field, limit) in [
+        ("--collision-pieces", "0", "collision.max_pieces", "1..=64"),
+        (
+            "--collision-vertices",
+            "4",
+            "collision.max_vertices",
+            "8..=256",
+        ),
+        (
+            "--collision-resolution",
+            "1000",
+            "collision.resolution",
+            "16..=128",
+        ),
+        ("--density", "0", "density", "> 0"),
+    ] {
+        let o = physnap(
+            &[
+                "export",
+                "--object",
+                EXAMPLE,
+                "--out",
+                out.to_str().unwrap(),
+                flag,
+                value,
+            ],
+            &[],
+        );
+        assert!(!o.status.success(), "{flag} {value} was accepted");
+        let e = stderr(&o);
+        assert!(
+            e.contains(field) && e.contains(limit) && e.contains(value),
+            "{flag}: {e}"
+        );
+        assert!(
+            !out.join("robot.urdf").exists(),
+            "{flag}: nothing is written"
+        );
+    }
+}

@@ -456,6 +456,8 @@ pub fn export_dir_with_repairs(
     out: &Path,
     opts: &ExportOptions,
 ) -> Result<ExportReport, ExportError> {
+    // Checked before the decomposition runs on them (artefacts checks again, cheaply).
+    opts.validate()?;
     let pieces = collision::pieces(obj, meshes, &opts.collision);
     export_dir_with_collision(obj, meshes, &pieces, repairs, out, opts)
 }

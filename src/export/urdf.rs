@@ -294,32 +294,23 @@ pub(crate) fn document(
 
 /// Wavefront OBJ text of `mesh` shifted by −`frame` (positions and per-vertex normals).
 pub fn obj_text(mesh: &TriMesh, frame: &Vector3<f64>) -> String {
-    let mut s = String::with_capacity(mesh.positions.len() * 60 + mesh.triangles.len() * 30);
-    let _ = writeln!(s, "# physnap part mesh, metres, link frame");
-    for p in &mesh.positions {
-        let _ = writeln!(
-            s,
-            "v {} {} {}",
-            p[0] as f64 - frame.x,
-            p[1] as f64 - frame.y,
-            p[2] as f64 - frame.z
-        );
-    }
-    for n in mesh.vertex_normals() {
-        let _ = writeln!(s, "vn {} {} {}", n[0], n[1], n[2]);
-    }
-    for t in &mesh.triangles {
-        let (a, b, c) = (t[0] + 1, t[1] + 1, t[2] + 1);
-        let _ = writeln!(s, "f {a}//{a} {b}//{b} {c}//{c}");
-    }
-    s
+    obj_with(mesh, frame, true)
 }
 
 /// Wavefront OBJ text of `mesh` shifted by −`frame`, positions and faces only (collision
 /// pieces: engines read no normals from them).
 pub fn positions_obj_text(mesh: &TriMesh, frame: &Vector3<f64>) -> String {
-    let mut s = String::with_capacity(mesh.positions.len() * 40 + mesh.triangles.len() * 20);
-    let _ = writeln!(s, "# physnap collision piece, metres, link frame");
+    obj_with(mesh, frame, false)
+}
+
+fn obj_with(mesh: &TriMesh, frame: &Vector3<f64>, normals: bool) -> String {
+    let mut s = String::with_capacity(mesh.positions.len() * 60 + mesh.triangles.len() * 30);
+    let what = if normals {
+        "part mesh"
+    } else {
+        "collision piece"
+    };
+    let _ = writeln!(s, "# physnap {what}, metres, link frame");
     for p in &mesh.positions {
         let _ = writeln!(
             s,
@@ -329,8 +320,18 @@ pub fn positions_obj_text(mesh: &TriMesh, frame: &Vector3<f64>) -> String {
             p[2] as f64 - frame.z
         );
     }
+    if normals {
+        for n in mesh.vertex_normals() {
+            let _ = writeln!(s, "vn {} {} {}", n[0], n[1], n[2]);
+        }
+    }
     for t in &mesh.triangles {
-        let _ = writeln!(s, "f {} {} {}", t[0] + 1, t[1] + 1, t[2] + 1);
+        let (a, b, c) = (t[0] + 1, t[1] + 1, t[2] + 1);
+        if normals {
+            let _ = writeln!(s, "f {a}//{a} {b}//{b} {c}//{c}");
+        } else {
+            let _ = writeln!(s, "f {a} {b} {c}");
+        }
     }
     s
 }

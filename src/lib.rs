@@ -10,6 +10,7 @@ pub mod error;
 pub mod eval;
 pub mod export;
 pub mod fixtures;
+pub mod frame;
 pub mod graph;
 pub mod io;
 pub mod kinematics;

@@ -14,6 +14,7 @@ const TRANSPORT_FREE: &[&str] = &[
     "src/engine",
     "src/eval",
     "src/sim.rs",
+    "src/frame.rs",
 ];
 const FORBIDDEN: &[&str] = &[
     "serde", "axum", "tonic", "prost", "utoipa", "tokio", "rusqlite", "reqwest",

@@ -666,3 +666,108 @@ fn bad_collision_and_inertial_flags_name_the_field() {
         );
     }
 }
+
+#[test]
+fn frame_auto_finds_the_scans_frame_and_returns_the_model_in_it() {
+    use physnap::eval::real::frame::{MovedUp, frame_error, move_of, moved};
+    let dir = tempfile::tempdir().unwrap();
+    // The example scan moved into a user's frame: +Y up, a random yaw, up to 2 m away.
+    let limits = physnap::pointcloud::Limits {
+        min_points: 1,
+        max_points: 100_000,
+    };
+    let scan = physnap::pointcloud::PointCloud::read(Path::new(SCAN), &limits)
+        .unwrap()
+        .points;
+    let m = move_of("cli", 0, MovedUp::Y);
+    let points = moved(&m, &scan);
+    let eye = moved(&m, &[[-0.9, 0.3, 0.6]])[0];
+    let cloud = write(
+        dir.path(),
+        "moved.json",
+        &serde_json::to_string(&points).unwrap(),
+    );
+    let camera = format!("{},{},{}", eye[0], eye[1], eye[2]);
+    let out = dir.path().join("g");
+    let mut args = vec![
+        "generate",
+        "--weights",
+        WEIGHTS,
+        "--points",
+        &cloud,
+        "--category",
+        "Microwave",
+        "--steps",
+        "8",
+        "--guidance-refine-steps",
+        "2",
+        "--resolution",
+        "16",
+        "--out",
+        out.to_str().unwrap(),
+        "--camera",
+        &camera,
+    ];
+    let o = physnap(&args, &[("PHYSNAP_FRAME", "auto"), ("PHYSNAP_UP", "0,1,0")]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let sample = out.join("sample_000");
+    let text = std::fs::read_to_string(sample.join("object.json")).unwrap();
+    let frame = physnap::io::object_json::frame_from_str(&text)
+        .unwrap()
+        .expect("object.json has the frame");
+    let err = frame_error(&m, &frame);
+    assert!(err.yaw_deg < 10.0 && err.floor_m < 0.05, "{err:?}");
+    let doc: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(doc["frame"]["mode"], "auto");
+    assert_eq!(
+        doc["scan_frame"]["parts"].as_array().unwrap().len(),
+        doc["parts"].as_array().unwrap().len()
+    );
+    // The model sits on the scan: every part centre (scan frame) inside the scan's box, grown
+    // by a quarter of its diagonal.
+    let (lo, hi) = physnap::engine::free_space::bounds(&points);
+    let grow = 0.25 * physnap::engine::free_space::extent(&points);
+    for p in doc["scan_frame"]["parts"].as_array().unwrap() {
+        for k in 0..3 {
+            let c = p["center"][k].as_f64().unwrap() as f32;
+            assert!(
+                c > lo[k] - grow && c < hi[k] + grow,
+                "{p} outside {lo:?}..{hi:?}"
+            );
+        }
+    }
+    let ranking: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("ranking.json")).unwrap()).unwrap();
+    assert_eq!(ranking["frame"]["chosen_by"], "planes+camera");
+    assert!(ranking["frame"]["floor"].is_number(), "{ranking}");
+    assert_eq!(ranking["frame"]["hypotheses"].as_array().unwrap().len(), 4);
+    let urdf = std::fs::read_to_string(sample.join("robot.urdf")).unwrap();
+    assert!(urdf.contains("<link name=\"world\"/>"), "{urdf}");
+    // Bad frames: a zero up, and auto without a scan.
+    args.extend_from_slice(&["--frame", "auto", "--up", "0,0,0"]);
+    let o = physnap(&args, &[]);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(
+        e.contains("up") && e.contains("non-zero") && e.contains("0,0,0"),
+        "{e}"
+    );
+    let o = physnap(
+        &[
+            "generate",
+            "--weights",
+            WEIGHTS,
+            "--frame",
+            "auto",
+            "--out",
+            dir.path().join("h").to_str().unwrap(),
+        ],
+        &[],
+    );
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("--frame auto: needs --points"),
+        "{}",
+        stderr(&o)
+    );
+}

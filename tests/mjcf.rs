@@ -16,6 +16,7 @@ use nalgebra::{Point3, Translation3, Vector3};
 use physnap::export::names::link_names;
 use physnap::export::{ExportNote, ExportOptions, ExportReport, export_dir, mesh_parts, urdf};
 use physnap::fixtures::box_part;
+use physnap::frame::ScanFrame;
 use physnap::mesh::primitives::part_primitive_mesh;
 use physnap::mesh::{MeshingOptions, TriMesh};
 use physnap::{ArticulatedObject, Joint, JointKind};
@@ -94,7 +95,11 @@ fn panel_rig() -> ArticulatedObject {
 
 /// World pose `[x, y, z, qw, qx, qy, qz]` of every link frame at each fraction, from physnap's
 /// kinematics (the URDF/MJCF link frames, moved by the parts' motions), merged parts left out.
-fn expected_poses(obj: &ArticulatedObject, report: &ExportReport) -> Value {
+fn expected_poses(
+    obj: &ArticulatedObject,
+    report: &ExportReport,
+    to_scan: &nalgebra::Isometry3<f64>,
+) -> Value {
     let frames = urdf::link_frames(obj);
     let names = link_names(obj);
     let merged: Vec<&str> = report
@@ -114,7 +119,7 @@ fn expected_poses(obj: &ArticulatedObject, report: &ExportReport) -> Value {
             .iter()
             .map(|&f| {
                 let motion = obj.part_motions(&obj.states_at(f))[p];
-                let pose = motion * Translation3::from(frames[p]);
+                let pose = to_scan * motion * Translation3::from(frames[p]);
                 let t = pose.translation.vector;
                 let q = pose.rotation;
                 json!([t.x, t.y, t.z, q.w, q.i, q.j, q.k])
@@ -125,8 +130,16 @@ fn expected_poses(obj: &ArticulatedObject, report: &ExportReport) -> Value {
     Value::Object(poses)
 }
 
-fn export(obj: &ArticulatedObject, meshes: &[TriMesh], dir: &Path) -> ExportReport {
-    let opts = ExportOptions::default();
+fn export(
+    obj: &ArticulatedObject,
+    meshes: &[TriMesh],
+    dir: &Path,
+    frame: Option<ScanFrame>,
+) -> ExportReport {
+    let opts = ExportOptions {
+        frame,
+        ..Default::default()
+    };
     export_dir(obj, meshes, dir, &opts).unwrap()
 }
 
@@ -169,13 +182,33 @@ fn urdf_and_mjcf_agree_in_mujoco() {
 
     let mut dirs = Vec::new();
     let mut expected = serde_json::Map::new();
-    for (obj, meshes) in &cases {
-        let dir = root.path().join(&obj.name);
-        let report = export(obj, meshes, &dir);
+    // The eight-part object once more, put back in a scan's frame (+Y up, yawed, moved): the
+    // URDF's `world` link and the MJCF's root body hold the transform.
+    let frame = ScanFrame::new([0.0, 1.0, 0.0], 0.7, [0.4, -1.1, 0.25]).unwrap();
+    let framed = vec![(cases[1].0.clone(), cases[1].1.clone(), Some(frame))];
+    for (obj, meshes, frame) in cases
+        .iter()
+        .map(|(o, m)| (o.clone(), m.clone(), None))
+        .chain(framed)
+    {
+        let name = if frame.is_some() {
+            format!("{}_framed", obj.name)
+        } else {
+            obj.name.clone()
+        };
+        let dir = root.path().join(name);
+        let report = export(&obj, &meshes, &dir, frame);
         let key = dir.to_str().unwrap().to_string();
-        expected.insert(key.clone(), expected_poses(obj, &report));
+        let to_scan = frame.unwrap_or_default().to_scan();
+        expected.insert(key.clone(), expected_poses(&obj, &report, &to_scan));
         dirs.push((key, obj.clone(), report));
     }
+    // The framed export: a `world` link with the transform, valid for urdfdom and Khronos.
+    let framed_dir = Path::new(&dirs[cases.len()].0);
+    let urdf_text = std::fs::read_to_string(framed_dir.join("robot.urdf")).unwrap();
+    assert!(urdf_text.contains("<link name=\"world\"/>"), "{urdf_text}");
+    common::check_urdf(&framed_dir.join("robot.urdf"));
+    common::assert_gltf_clean(&framed_dir.join("model.glb"));
 
     // The rig: the knob went into the lid, the slider kept its link with the floor mass.
     let (_, rig, report) = &dirs[2];
@@ -244,7 +277,7 @@ fn urdf_and_mjcf_agree_in_mujoco() {
     let doc: Value = serde_json::from_str(&stdout).unwrap();
     assert_eq!(doc["mujoco"], "4.0.0");
     let results = doc["results"].as_array().unwrap();
-    assert_eq!(results.len(), cases.len());
+    assert_eq!(results.len(), dirs.len());
     for (r, (_, obj, _)) in results.iter().zip(&dirs) {
         assert_eq!(r["ok"], true, "{r:#}");
         let movable: usize = obj

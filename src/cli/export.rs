@@ -53,7 +53,13 @@ pub(crate) struct ExportArgs {
 pub(crate) fn export(a: ExportArgs) -> anyhow::Result<()> {
     let obj = physnap::io::object_json::read(&a.object)
         .with_context(|| format!("reading {}", a.object.display()))?;
+    // A generated object.json in a scan's frame (`generate --frame auto`) is exported there.
+    let frame = std::fs::read_to_string(&a.object)
+        .map_err(anyhow::Error::from)
+        .and_then(|t| Ok(physnap::io::object_json::frame_from_str(&t)?))
+        .with_context(|| format!("reading the frame of {}", a.object.display()))?;
     let opts = ExportOptions {
+        frame,
         meshing: MeshingOptions {
             resolution: a.resolution,
         },

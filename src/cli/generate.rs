@@ -100,9 +100,66 @@ pub(crate) struct GenerateArgs {
     /// typical size in the training data, the result scaled back), off, or a factor.
     #[arg(long, env = "PHYSNAP_SCALE", default_value = "auto")]
     pub(crate) scale: String,
+    /// The scan's frame: canonical (default: the points are in physnap's frame, +Z up, front
+    /// −X, floor z = 0) or auto (any right-handed metric frame with up --up: the floor, yaw and
+    /// position are estimated, the model is returned in the scan's frame).
+    #[arg(long, env = "PHYSNAP_FRAME", default_value = "canonical", value_parser = ["canonical", "auto"])]
+    pub(crate) frame: String,
+    /// The scan's up direction x,y,z with --frame auto (default 0,0,1).
+    #[arg(
+        long,
+        env = "PHYSNAP_UP",
+        default_value = "0,0,1",
+        value_name = "X,Y,Z",
+        allow_hyphen_values = true
+    )]
+    pub(crate) up: String,
     /// Sampler and guidance schedule.
     #[command(flatten)]
     pub(crate) sampling: SamplingArgs,
+}
+
+/// `--up x,y,z` as a vector (the estimate checks it is finite and non-zero).
+pub(crate) fn parse_up(v: &str) -> anyhow::Result<[f64; 3]> {
+    let c: Vec<f64> = v
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .ok()
+        .filter(|c: &Vec<f64>| c.len() == 3)
+        .with_context(|| format!("invalid --up {v:?}: expected x,y,z (three numbers)"))?;
+    Ok([c[0], c[1], c[2]])
+}
+
+/// The `--frame` / `--up` flags for the scan of `guidance`: None for canonical, else the
+/// engine's estimate (needs --points).
+pub(crate) fn frame_estimate(
+    mode: &str,
+    up: &str,
+    guidance: Option<&GuidanceOptions>,
+) -> anyhow::Result<Option<physnap::engine::frame::FrameEstimate>> {
+    if mode != "auto" {
+        return Ok(None);
+    }
+    let up = parse_up(up)?;
+    let Some(g) = guidance.filter(|g| !g.points.is_empty()) else {
+        bail!("invalid --frame auto: needs --points (the scan whose frame is estimated)");
+    };
+    let est = physnap::engine::frame::estimate(&g.points, up, &g.cameras)
+        .map_err(|e| anyhow::anyhow!("--frame auto: {e}"))?;
+    Ok(Some(est))
+}
+
+/// The scale flag against the scan in the canonical frame (`est`'s when auto).
+fn canonical_points(
+    guidance: Option<&GuidanceOptions>,
+    est: Option<&physnap::engine::frame::FrameEstimate>,
+) -> Vec<[f32; 3]> {
+    let points = guidance.map_or(&[][..], |g| &g.points[..]);
+    match est {
+        Some(e) => e.frame.points_to_canonical(points),
+        None => points.to_vec(),
+    }
 }
 
 /// The `--scale` flag for a scan of `points` (empty: no scan) of `category`: auto is the
@@ -331,6 +388,10 @@ pub(crate) fn generate(a: GenerateArgs) -> anyhow::Result<()> {
     }
     let guidance = guidance_options(&a)?;
     let loss_guided = guidance.as_ref().is_some_and(|g| g.is_active());
+    let estimate = frame_estimate(&a.frame, &a.up, guidance.as_ref())?;
+    if let Some(e) = &estimate {
+        println!("{}", physnap::io::verdict::frame_summary(e));
+    }
     let sampler = sampler(&a.sampling.sampler, a.sampling.eta);
     let req = GenerateRequest {
         seed: a.seed,
@@ -350,11 +411,14 @@ pub(crate) fn generate(a: GenerateArgs) -> anyhow::Result<()> {
         repair: repair_mode(&a.repair),
         scale: scale_of(
             &a.scale,
-            guidance.as_ref().map_or(&[][..], |g| &g.points[..]),
+            &canonical_points(guidance.as_ref(), estimate.as_ref()),
             category.map(|i| models.manifest.categories[i].as_str()),
         )?,
+        frame: estimate.as_ref().map(|e| e.frame),
         ..Default::default()
     };
+    // What the samples are ranked against: the scan in the canonical frame they come out in.
+    let ranked_against = physnap::engine::generate::canonical_guidance(&req);
     req.meshing.validate()?;
     let schedule = Schedule::default();
     let steps = physnap::engine::schedule::timesteps(schedule.len(), a.sampling.steps).len();
@@ -416,6 +480,7 @@ pub(crate) fn generate(a: GenerateArgs) -> anyhow::Result<()> {
     let per_sample = started.elapsed().as_secs_f64() / a.samples as f64;
     let opts = ExportOptions {
         meshing: req.meshing,
+        frame: req.frame,
         ..Default::default()
     };
     let mut rows = Vec::new();
@@ -450,7 +515,7 @@ pub(crate) fn generate(a: GenerateArgs) -> anyhow::Result<()> {
                 req.retrieval.as_str()
             );
         }
-        if let Some(opts) = &guidance {
+        if let Some(opts) = &ranked_against {
             let m = guided_metrics(
                 &decoder,
                 &g.raw,
@@ -485,8 +550,8 @@ pub(crate) fn generate(a: GenerateArgs) -> anyhow::Result<()> {
             l.pc, l.pen, l.mob, l.free, l.total
         );
     }
-    if let (Some(opts), Some(points)) = (&guidance, &a.points) {
-        write_ranking(&a.out, points, opts, rows, &diverged)?;
+    if let (Some(opts), Some(points)) = (&ranked_against, &a.points) {
+        write_ranking(&a.out, points, opts, rows, &diverged, estimate.as_ref())?;
     }
     Ok(())
 }
@@ -558,6 +623,7 @@ pub(crate) fn write_ranking(
     opts: &GuidanceOptions,
     rows: Vec<RankRow>,
     diverged: &[(String, u64, String)],
+    frame: Option<&physnap::engine::frame::FrameEstimate>,
 ) -> anyhow::Result<()> {
     // Rows come in sample order (sample_000, sample_001, ...), so ties stay in name order.
     let rows = physnap::eval::rank::ranked(rows, |r| r.terms.score());
@@ -593,7 +659,7 @@ pub(crate) fn write_ranking(
         })
         .collect();
     let best = rows.first().map(|r| r.name.clone());
-    let doc = serde_json::json!({
+    let mut doc = serde_json::json!({
         "format": "physnap.ranking/v1",
         "points": points.display().to_string(),
         "ranked_by": "score = D_pc / scan diagonal + free-space share + attachment gap / object diagonal + O_mesh + sim contact depth / object diagonal (lower is better)",
@@ -607,6 +673,9 @@ pub(crate) fn write_ranking(
             "sample": name, "seed": seed, "error": error,
         })).collect::<Vec<_>>(),
     });
+    if let (Some(e), Some(d)) = (frame, doc.as_object_mut()) {
+        d.insert("frame".into(), physnap::io::verdict::frame_json(e));
+    }
     let path = out.join("ranking.json");
     std::fs::write(&path, serde_json::to_string_pretty(&doc)? + "\n")?;
     for (r, row) in rows.iter().enumerate() {

@@ -26,6 +26,11 @@
 //! by s before repair and meshing (latent shapes live in the box's normalised frame, so only
 //! boxes, centres, origins and slide ranges change).
 //!
+//! Frame ([`GenerateRequest::frame`], physnap's): a scan in the user's frame is moved into the
+//! canonical frame (+Z up, front −X, floor z = 0) by its [`ScanFrame`] before the scale; the
+//! sample is drawn, projected, repaired and meshed there, and the exporters put it back on
+//! the scan (`crate::frame`; the frame itself is estimated by [`super::frame::estimate`]).
+//!
 //! Repair ([`RepairMode::On`], physnap's, not NAP's; the CLI's and the service's default): after
 //! projection the joints are repaired (`graph::repair`: attach, snap, pivot on an edge or the
 //! centre line), and after meshing the leaf parts the scan does not allow are removed
@@ -41,6 +46,7 @@ use super::guidance::{GuidanceOptions, SdfField};
 use super::prune::{Removed, prune};
 use super::sample::{GuidanceContext, SampleRequest, Sampler, StepEvent, sample_guided};
 use super::schedule::Schedule;
+use crate::frame::ScanFrame;
 use crate::graph::repair::{Repair, repair};
 use crate::graph::{FeatureScales, GraphTensor, ProjectOptions, project};
 use crate::mesh::{MeshingOptions, TriMesh, part_mesh};
@@ -213,6 +219,10 @@ pub struct GenerateRequest {
     /// Scale hypothesis (module docs): the scan and its cameras are multiplied by this before
     /// sampling, the object divided by it after projection. None (or 1): the scan as given.
     pub scale: Option<f64>,
+    /// The scan's frame (module docs; None or the identity: the scan is canonical). The
+    /// guidance's points and cameras are moved into the canonical frame before anything else;
+    /// objects and meshes stay canonical and [`Generated::frame`] carries it to the exporters.
+    pub frame: Option<ScanFrame>,
 }
 
 /// Smallest and largest accepted [`GenerateRequest::scale`].
@@ -230,6 +240,19 @@ pub fn auto_scale(points: &[[f32; 3]], typical: Option<f64>) -> Option<f64> {
     (d.is_finite() && d > 1e-6).then(|| (t / d).clamp(1.0 / AUTO_SCALE_LIMIT, AUTO_SCALE_LIMIT))
 }
 
+/// `req.guidance` in the canonical frame (module docs): its points and cameras moved by
+/// `req.frame`. What the samples are ranked against, since they come out canonical.
+pub fn canonical_guidance(req: &GenerateRequest) -> Option<GuidanceOptions> {
+    match (&req.guidance, req.frame.filter(|f| !f.is_canonical())) {
+        (Some(g), Some(f)) => Some(GuidanceOptions {
+            points: f.points_to_canonical(&g.points),
+            cameras: f.points_to_canonical(&g.cameras),
+            ..g.clone()
+        }),
+        (g, _) => g.clone(),
+    }
+}
+
 /// One generated sample.
 #[derive(Debug, Clone)]
 pub struct Generated {
@@ -243,6 +266,9 @@ pub struct Generated {
     /// The scale hypothesis the sample was drawn under (1: none); `object` and `meshes` are
     /// back in the scan's frame.
     pub scale: f64,
+    /// The scan's frame the sample was drawn for (the identity: canonical input); `object` and
+    /// `meshes` are in the canonical frame, `frame.to_scan()` puts them on the scan.
+    pub frame: ScanFrame,
     /// The projected object (latent part shapes).
     pub object: ArticulatedObject,
     /// Part meshes, object frame at rest.
@@ -352,8 +378,10 @@ pub fn generate_with(
         Some(s) if s != 1.0 => Some(s),
         _ => None,
     };
-    // The guidance in the sampling frame.
-    let guidance = match (&req.guidance, scale) {
+    // The guidance in the canonical frame, then in the sampling frame.
+    let frame = req.frame.filter(|f| !f.is_canonical());
+    let canonical = canonical_guidance(req);
+    let guidance = match (&canonical, scale) {
         (Some(g), Some(s)) => {
             let mul = |v: &[[f32; 3]]| -> Vec<[f32; 3]> {
                 v.iter().map(|p| p.map(|x| (x as f64 * s) as f32)).collect()
@@ -447,8 +475,7 @@ pub fn generate_with(
         }
         let removed = match req.repair {
             RepairMode::On => {
-                let free = req
-                    .guidance
+                let free = canonical
                     .as_ref()
                     .filter(|g| !g.cameras.is_empty())
                     .map(|g| FreeSpace::new(&g.points, &g.cameras));
@@ -463,6 +490,7 @@ pub fn generate_with(
             seed,
             raw,
             scale: scale.unwrap_or(1.0),
+            frame: frame.unwrap_or_default(),
             object,
             meshes,
             retrieved,

@@ -5,6 +5,7 @@
 //! current rayon pool, reports every step through a callback (progress, cancellation, previews)
 //! and returns raw graphs for projection and export.
 
+pub mod frame;
 pub mod free_space;
 pub mod generate;
 pub mod guidance;

@@ -95,10 +95,34 @@ pub fn build(
     };
 
     let root = obj.root();
+    // The scan's frame (crate::frame): one root node holding canonical → scan in glTF axes,
+    // A·T·A⁻¹ with A: (x, y, z) ↦ (x, z, −y).
+    let frame_node = opts.frame.filter(|f| !f.is_canonical()).map(|f| {
+        let iso = f.to_scan();
+        let a = nalgebra::Matrix3::new(1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, -1.0, 0.0);
+        let r = a * iso.rotation.to_rotation_matrix().matrix() * a.transpose();
+        let q =
+            UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(r));
+        nodes.push(Node {
+            name: "scan_frame".into(),
+            parent: None,
+            translation: f3(&to_gltf(&iso.translation.vector)),
+            rotation: quat(&q),
+            mesh: None,
+            color: [1.0; 4],
+            extras: json!({ "frame": {
+                "up": f3(&f.up),
+                "yaw": f.yaw,
+                "translation": f3(&f.translation),
+                "note": "canonical (physnap object frame) -> the scan's frame",
+            }}),
+        });
+        nodes.len() - 1
+    });
     part_node[root] = nodes.len();
     nodes.push(Node {
         name: names[root].clone(),
-        parent: None,
+        parent: frame_node,
         translation: f3(&to_gltf(&obj.parts[root].center)),
         rotation: [0.0, 0.0, 0.0, 1.0],
         mesh: Some(local_mesh(&meshes[root], &obj.parts[root].center)),

@@ -132,7 +132,29 @@ impl BodyWriter<'_> {
         let parent_frame = via.map_or(Vector3::zeros(), |k| self.frames[self.obj.joints[k].parent]);
         let pos = self.frames[p] - parent_frame;
         let x = &mut *self.x;
-        let _ = writeln!(x, "{ind}<body name=\"{name}\" pos=\"{}\">", v(&pos));
+        match self
+            .opts
+            .frame
+            .filter(|f| via.is_none() && !f.is_canonical())
+        {
+            // The root body on the scan (crate::frame): MuJoCo's quat is w x y z.
+            Some(f) => {
+                let iso = f.to_scan() * nalgebra::Translation3::from(pos);
+                let q = iso.rotation;
+                let _ = writeln!(
+                    x,
+                    "{ind}<body name=\"{name}\" pos=\"{}\" quat=\"{} {} {} {}\">",
+                    v(&iso.translation.vector),
+                    q.w,
+                    q.i,
+                    q.j,
+                    q.k
+                );
+            }
+            None => {
+                let _ = writeln!(x, "{ind}<body name=\"{name}\" pos=\"{}\">", v(&pos));
+            }
+        }
         if let Some(k) = via {
             let j = &self.obj.joints[k];
             let o = self.opts;

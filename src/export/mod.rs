@@ -104,6 +104,11 @@ pub struct ExportOptions {
     pub sim: crate::sim::SimOptions,
     /// Duration of one sweep lower → upper in the GLB animations (seconds).
     pub sweep_seconds: f32,
+    /// The scan's frame (None or the identity: outputs in the canonical frame, as before).
+    /// Otherwise the model is put back on the scan: the URDF gains a `world` link and a fixed
+    /// joint holding `to_scan`, the MJCF's root body and the GLB's root node hold it, and
+    /// `object.json` lists it with the parts and joints in the scan's frame.
+    pub frame: Option<crate::frame::ScanFrame>,
 }
 
 impl Default for ExportOptions {
@@ -118,6 +123,7 @@ impl Default for ExportOptions {
             collision: collision::CollisionOptions::default(),
             sim: crate::sim::SimOptions::default(),
             sweep_seconds: 2.0,
+            frame: None,
         }
     }
 }
@@ -311,7 +317,8 @@ pub fn artefacts(
     files.push(("robot.zip".to_string(), zip));
     files.push((
         "object.json".to_string(),
-        crate::io::object_json::to_string_with(obj, repairs, Some(sim_doc)).into_bytes(),
+        crate::io::object_json::to_string_with(obj, repairs, Some(sim_doc), opts.frame.as_ref())
+            .into_bytes(),
     ));
     Ok(Artefacts {
         files,

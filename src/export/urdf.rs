@@ -162,6 +162,9 @@ fn write_inertial(x: &mut String, indent: &str, i: &Inertial, frame: &Vector3<f6
     let _ = writeln!(x, "{indent}</inertial>");
 }
 
+/// The link that stands for the scan's frame when the export has one ([`ExportOptions::frame`]).
+pub const WORLD_LINK: &str = "world";
+
 /// The URDF text of [`build`] with the link names given (one per part).
 pub(crate) fn document(
     obj: &ArticulatedObject,
@@ -205,6 +208,28 @@ pub(crate) fn document(
             let _ = writeln!(x, "    </collision>");
         }
         let _ = writeln!(x, "  </link>");
+    }
+    if let Some(f) = opts.frame.filter(|f| !f.is_canonical()) {
+        // The scan's frame: `world` is the scan's origin, the root link sits where the scan
+        // has it (crate::frame).
+        let root = obj.root();
+        let iso = f.to_scan() * nalgebra::Translation3::from(frames[root]);
+        let (r, p, y) = iso.rotation.euler_angles();
+        let _ = writeln!(x, "  <link name=\"{WORLD_LINK}\"/>");
+        let _ = writeln!(
+            x,
+            "  <joint name=\"{WORLD_LINK}_to_{}\" type=\"fixed\">",
+            names[root]
+        );
+        let _ = writeln!(x, "    <parent link=\"{WORLD_LINK}\"/>");
+        let _ = writeln!(x, "    <child link=\"{}\"/>", names[root]);
+        let _ = writeln!(
+            x,
+            "    <origin xyz=\"{}\" rpy=\"{}\"/>",
+            v(&iso.translation.vector),
+            v(&Vector3::new(r, p, y))
+        );
+        let _ = writeln!(x, "  </joint>");
     }
     for k in obj.joints_topological() {
         let j = &obj.joints[k];

@@ -25,6 +25,7 @@ use serde::{Deserialize, Serialize};
 
 use super::FormatError;
 use crate::error::CoreError;
+use crate::frame::ScanFrame;
 use crate::graph::repair::Repair;
 use crate::object::{ArticulatedObject, Joint, JointKind, Part};
 use crate::shape::{Axis, PartShape, Primitive};
@@ -51,6 +52,27 @@ struct ObjectDoc {
     /// informational, accepted and dropped on read.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     sim: Option<serde_json::Value>,
+    /// The scan's frame (`crate::frame`; omitted for canonical output): `mode`, `up`, `yaw`
+    /// (radians), `yaw_degrees`, `translation` (scan → canonical: p_c = R p_s + t) and
+    /// `to_scan` (canonical → scan, 4×4 row-major). Read back by [`frame_from_str`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    frame: Option<FrameDoc>,
+    /// The parts (centre, rotation, half extents) and joints (axis, origin) in the scan's
+    /// frame: informational, accepted and dropped on read (`parts` and `joints` above stay in
+    /// the canonical frame, the one physnap reads).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    scan_frame: Option<serde_json::Value>,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FrameDoc {
+    mode: String,
+    up: [f64; 3],
+    yaw: f64,
+    yaw_degrees: f64,
+    translation: [f64; 3],
+    to_scan: [[f64; 4]; 4],
 }
 
 #[derive(Serialize, Deserialize)]
@@ -168,18 +190,73 @@ pub fn to_string(obj: &ArticulatedObject) -> String {
 /// [`to_string`] with the joint repairs generation made, as `"repairs": [{"joint": <child
 /// part>, "rule", "amount", "detail"}]` (omitted when empty).
 pub fn to_string_with_repairs(obj: &ArticulatedObject, repairs: &[Repair]) -> String {
-    to_string_with(obj, repairs, None)
+    to_string_with(obj, repairs, None, None)
+}
+
+/// The scan's frame of an object JSON document (None: canonical, no `"frame"`).
+pub fn frame_from_str(text: &str) -> Result<Option<ScanFrame>, FormatError> {
+    #[derive(Deserialize)]
+    struct Only {
+        #[serde(default)]
+        frame: Option<FrameDoc>,
+    }
+    let doc: Only = serde_json::from_str(text).map_err(|e| FormatError::Malformed {
+        what: "object JSON",
+        path: "frame".into(),
+        message: e.to_string(),
+    })?;
+    doc.frame
+        .map(|f| ScanFrame::new(f.up, f.yaw, f.translation).map_err(FormatError::from))
+        .transpose()
+}
+
+/// `obj`'s parts and joints in the scan's frame of `f` (module docs of `crate::frame`).
+fn scan_frame_json(obj: &ArticulatedObject, f: &ScanFrame) -> serde_json::Value {
+    let iso = f.to_scan();
+    let rot = iso.rotation.to_rotation_matrix();
+    let m = rot.matrix();
+    let rows: [[f64; 3]; 3] = std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)]));
+    let p3 = |p: Point3<f64>| -> [f64; 3] { (iso * p).coords.into() };
+    serde_json::json!({
+        "note": "parts and joints of this document in the scan's frame: a part is its box (half_extents) rotated by rotation (row-major) about center",
+        "parts": obj.parts.iter().map(|p| serde_json::json!({
+            "name": p.name,
+            "center": p3(Point3::from(p.center)),
+            "rotation": rows,
+            "half_extents": <[f64; 3]>::from(p.half_extents),
+        })).collect::<Vec<_>>(),
+        "joints": obj.joints.iter().map(|j| serde_json::json!({
+            "parent": obj.parts[j.parent].name,
+            "child": obj.parts[j.child].name,
+            "type": j.kind.as_str(),
+            "axis": <[f64; 3]>::from(rot * j.axis),
+            "origin": p3(j.origin),
+        })).collect::<Vec<_>>(),
+    })
 }
 
 /// [`to_string_with_repairs`] with the export's physics check as `"sim"` (the document of
-/// [`crate::io::verdict::sim_json`]).
+/// [`crate::io::verdict::sim_json`]) and the scan's frame (`"frame"`, `"scan_frame"`; none for
+/// None or the identity).
 pub fn to_string_with(
     obj: &ArticulatedObject,
     repairs: &[Repair],
     sim: Option<serde_json::Value>,
+    frame: Option<&ScanFrame>,
 ) -> String {
     let mut doc = to_doc(obj);
     doc.sim = sim;
+    if let Some(f) = frame.filter(|f| !f.is_canonical()) {
+        doc.frame = Some(FrameDoc {
+            mode: "auto".into(),
+            up: f.up.into(),
+            yaw: f.yaw,
+            yaw_degrees: f.yaw.to_degrees(),
+            translation: f.translation.into(),
+            to_scan: f.to_scan_matrix(),
+        });
+        doc.scan_frame = Some(scan_frame_json(obj, f));
+    }
     doc.repairs = repairs
         .iter()
         .map(|r| RepairDoc {
@@ -345,6 +422,8 @@ fn to_doc(obj: &ArticulatedObject) -> ObjectDoc {
             .collect(),
         repairs: Vec::new(),
         sim: None,
+        frame: None,
+        scan_frame: None,
     }
 }
 

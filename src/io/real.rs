@@ -246,6 +246,9 @@ pub fn scan_json(s: &ScanResult) -> Value {
         "scan": s.scan, "object": s.object, "category": s.category, "view": s.view,
         "camera": s.camera, "points": s.points, "gt_joints": s.gt_joints,
         "gt_revolute": s.gt_revolute,
+        "frame_error": s.frame_error.map(|e| json!({
+            "yaw_deg": e.yaw_deg, "floor_m": e.floor_m,
+        })),
         "jobs": s.jobs.iter().map(job_json).collect::<Vec<_>>(),
     })
 }
@@ -355,6 +358,15 @@ pub fn read_scan_result(path: &Path) -> Result<ScanResult, RealFileError> {
         points: v["points"].as_u64().unwrap_or(0) as usize,
         gt_joints: v["gt_joints"].as_u64().ok_or_else(bad)? as usize,
         gt_revolute: v["gt_revolute"].as_u64().ok_or_else(bad)? as usize,
+        frame_error: match (
+            v["frame_error"]["yaw_deg"].as_f64(),
+            v["frame_error"]["floor_m"].as_f64(),
+        ) {
+            (Some(yaw_deg), Some(floor_m)) => {
+                Some(crate::eval::real::frame::FrameError { yaw_deg, floor_m })
+            }
+            _ => None,
+        },
         jobs,
     })
 }

@@ -6,6 +6,7 @@
 
 use serde_json::{Value, json};
 
+use crate::engine::frame::FrameEstimate;
 use crate::eval::rank::RankTerms;
 use crate::object::ArticulatedObject;
 use crate::sim::SimReport;
@@ -44,4 +45,41 @@ pub fn terms_json(obj: &ArticulatedObject, t: &RankTerms) -> Value {
         "sim_depth_per_object_diagonal": num(t.sim.map_or(f64::NAN, |s| s.worst_depth() / diag)),
         "sim": t.sim.as_ref().map(|s| sim_json(obj, s)),
     })
+}
+
+/// The frame estimate of a scan in the user's frame (`ranking.json` `frame`): the transform,
+/// the floor, how the yaw was chosen and every hypothesis's terms.
+pub fn frame_json(e: &FrameEstimate) -> Value {
+    let f = &e.frame;
+    json!({
+        "mode": "auto",
+        "up": <[f64; 3]>::from(f.up),
+        "yaw": f.yaw,
+        "yaw_degrees": f.yaw.to_degrees(),
+        "translation": <[f64; 3]>::from(f.translation),
+        "floor": e.floor,
+        "plane_share": e.plane_share,
+        "chosen_by": e.source.as_str(),
+        "hypotheses": e.hypotheses.iter().enumerate().map(|(k, h)| json!({
+            "yaw_degrees": h.yaw.to_degrees(),
+            "face_share": h.face_share,
+            "relief": h.relief,
+            "camera": h.camera,
+            "score": h.score,
+            "chosen": k == e.chosen,
+        })).collect::<Vec<_>>(),
+    })
+}
+
+/// One line on the estimate, for a terminal.
+pub fn frame_summary(e: &FrameEstimate) -> String {
+    format!(
+        "frame: yaw {:.1}° (by {}), floor {:.3} m along up, translation [{:.3}, {:.3}, {:.3}]",
+        e.frame.yaw.to_degrees(),
+        e.source.as_str(),
+        e.floor,
+        e.frame.translation.x,
+        e.frame.translation.y,
+        e.frame.translation.z
+    )
 }

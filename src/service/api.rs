@@ -144,6 +144,15 @@ pub struct JobRequest {
     /// a factor such as `"2.5"` (1/16–16).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scale: Option<String>,
+    /// The scan's frame: `canonical` (default: physnap's frame, +Z up, front −X, floor z = 0)
+    /// or `auto` (any right-handed metric frame whose up is `up`: the floor, yaw and position
+    /// are estimated at submission; `object.json`, the URDF's `world` link, the MJCF root and
+    /// the GLB root node put the model back in the scan's frame).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frame: Option<String>,
+    /// The scan's up direction with `frame: auto`, `[x, y, z]` (default `[0, 0, 1]`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub up: Option<[f64; 3]>,
 }
 
 /// `camera` of a [`JobRequest`]: one sensor position or a list of them. Its OpenAPI schema is
@@ -261,6 +270,10 @@ pub struct UploadParams {
     pub repair: Option<String>,
     /// Scale hypothesis (`auto`, `off` or a factor).
     pub scale: Option<String>,
+    /// The scan's frame (`canonical`, `auto`).
+    pub frame: Option<String>,
+    /// The scan's up direction `x,y,z` with `frame=auto` (default `0,0,1`).
+    pub up: Option<String>,
 }
 
 impl JobRequest {
@@ -323,6 +336,8 @@ impl JobRequest {
             w_free: self.w_free,
             repair: self.repair,
             scale: self.scale,
+            frame: self.frame,
+            up: self.up,
         })
     }
 }
@@ -381,8 +396,40 @@ impl UploadParams {
             w_free: self.w_free,
             repair: self.repair,
             scale: self.scale,
+            frame: self.frame,
+            up: self.up.as_deref().map(parse_up).transpose()?,
         })
     }
+}
+
+/// The scan's frame a job ran with (`frame: auto`): scan → canonical, p_c = Rz(yaw) U(up) p_s
+/// + translation, U the smallest rotation taking `up` to +Z.
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct FrameView {
+    /// `auto`.
+    pub mode: String,
+    /// The scan's up direction (unit).
+    pub up: [f64; 3],
+    /// Yaw about +Z after up was turned onto it, degrees in [0, 360).
+    pub yaw_degrees: f64,
+    /// Translation (metres, canonical frame).
+    pub translation: [f64; 3],
+}
+
+/// An `up` query value, `x,y,z`, as numbers (the engine checks they are finite and not all 0).
+fn parse_up(v: &str) -> Result<[f64; 3], Violation> {
+    let c: Vec<f64> = v
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .ok()
+        .filter(|c: &Vec<f64>| c.len() == 3)
+        .ok_or_else(|| Violation {
+            field: "up".into(),
+            limit: "x,y,z: three numbers".into(),
+            value: format!("{v:?}"),
+        })?;
+    Ok([c[0], c[1], c[2]])
 }
 
 /// The validated request, echoed back (seed always set).
@@ -445,6 +492,9 @@ pub struct RequestView {
     /// The scale hypothesis as run (absent: none, the scan as given).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scale: Option<f64>,
+    /// The scan's frame as run (absent: canonical input).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frame: Option<FrameView>,
     /// Whether guidance is applied (some weight > 0, ℓ_free's with a camera); false = plain NAP
     /// sampling.
     pub guided: bool,
@@ -685,6 +735,12 @@ pub fn request_view(s: &JobSpec) -> RequestView {
         w_free: s.w_free,
         repair: s.repair.as_str().to_string(),
         scale: s.scale,
+        frame: s.frame.map(|f| FrameView {
+            mode: "auto".into(),
+            up: f.up.into(),
+            yaw_degrees: f.yaw.to_degrees(),
+            translation: f.translation.into(),
+        }),
         guided: s.guided(),
     }
 }

@@ -159,6 +159,8 @@ pub fn input_of(spec: pb::JobSpec) -> JobInput {
         w_free: spec.w_free,
         repair: Some(spec.repair).filter(|s| !s.is_empty()),
         scale: Some(spec.scale).filter(|s| !s.is_empty()),
+        frame: Some(spec.frame).filter(|s| !s.is_empty()),
+        up: spec.up.map(|u| [u.x, u.y, u.z]),
     }
 }
 

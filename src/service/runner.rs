@@ -270,6 +270,13 @@ fn ranking_json(spec: &JobSpec, guidance: &Option<GuidanceOptions>, rows: &[Rank
         "category_guidance_below": spec.category_guidance_below,
         "joint_motion": spec.joint_motion.as_str(),
         "repair": spec.repair.as_str(),
+        "frame": spec.frame.map(|f| serde_json::json!({
+            "mode": "auto",
+            "up": <[f64; 3]>::from(f.up),
+            "yaw_degrees": f.yaw.to_degrees(),
+            "floor": -f.translation.z,
+            "translation": <[f64; 3]>::from(f.translation),
+        })),
         "best": best,
         "samples": rows.iter().enumerate().map(|(rank, r)| serde_json::json!({
             "rank": rank + 1,
@@ -320,6 +327,13 @@ pub fn run_job(
         joint_motion: spec.joint_motion,
         repair: spec.repair,
         scale: spec.scale,
+        frame: spec.frame,
+    };
+    // The samples come out canonical: they are ranked against the scan moved there.
+    let ranked_against = crate::engine::generate::canonical_guidance(&req);
+    let (rank_points, rank_cameras) = match &ranked_against {
+        Some(g) => (g.points.clone(), g.cameras.clone()),
+        None => (spec.points.clone(), spec.cameras.clone()),
     };
     let decoder = LatentSdfDecoder::new(&m.shape_prior.decoder);
     let started = Instant::now();
@@ -418,7 +432,7 @@ pub fn run_job(
     let scored: Vec<(RankTerms, Generated)> = done_samples
         .into_iter()
         .map(|g| {
-            let t = sample_terms(&g.object, &g.meshes, &spec.points, &spec.cameras, g.seed);
+            let t = sample_terms(&g.object, &g.meshes, &rank_points, &rank_cameras, g.seed);
             (t, g)
         })
         .collect();
@@ -474,6 +488,7 @@ pub fn run_job(
     });
     let opts = ExportOptions {
         meshing: req.meshing,
+        frame: spec.frame,
         ..Default::default()
     };
     let mut art = artefacts(

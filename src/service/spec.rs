@@ -123,6 +123,12 @@ pub struct JobInput {
     /// category's typical procedural size, at most ×/÷ 4, and the result scaled back), `off`, or
     /// a factor such as `"2.5"` (1/16–16).
     pub scale: Option<String>,
+    /// The scan's frame: `canonical` (default: physnap's frame, +Z up, front −X, floor z = 0)
+    /// or `auto` (any right-handed metric frame with up `up`: floor, yaw and position are
+    /// estimated at submission, the model is returned in the scan's frame).
+    pub frame: Option<String>,
+    /// The scan's up direction with `frame: auto` (default [0, 0, 1]).
+    pub up: Option<[f64; 3]>,
 }
 
 /// Most cameras of a job (the engine's limit).
@@ -253,6 +259,9 @@ pub struct JobSpec {
     /// The resolved scale hypothesis (None: the scan as given); `auto` is resolved at
     /// submission, so a stored job keeps the factor it was accepted with.
     pub scale: Option<f64>,
+    /// The scan's frame (None: canonical input); `auto` is estimated at submission, so a
+    /// stored job keeps the frame it was accepted with.
+    pub frame: Option<crate::frame::ScanFrame>,
 }
 
 /// Largest τ accepted (the engine's limit).
@@ -519,6 +528,45 @@ pub fn validate(
         Some(r) => RepairMode::parse(r)
             .ok_or_else(|| violation("repair", "\"on\" or \"off\"", format!("{r:?}")))?,
     };
+    // The scan's frame, estimated now (the scale is then the canonical scan's).
+    let frame = match input
+        .frame
+        .as_deref()
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+    {
+        None | Some("canonical") => {
+            if let Some(up) = input.up {
+                return Err(violation(
+                    "up",
+                    "given only with frame \"auto\"",
+                    format!("{up:?}"),
+                ));
+            }
+            None
+        }
+        Some("auto") => {
+            let up = input.up.unwrap_or([0.0, 0.0, 1.0]);
+            let est =
+                crate::engine::frame::estimate(&points, up, &cameras).map_err(|e| match e {
+                    EngineError::Invalid(i) => Violation {
+                        field: i.field,
+                        limit: i.limit,
+                        value: i.value,
+                    },
+                    other => violation("frame", "an estimable scan", other.to_string()),
+                })?;
+            Some(est.frame)
+        }
+        Some(f) => {
+            return Err(violation(
+                "frame",
+                "\"canonical\" or \"auto\"",
+                format!("{f:?}"),
+            ));
+        }
+    };
+    let canonical_points = frame.map(|f| f.points_to_canonical(&points));
     let scale = match input
         .scale
         .as_deref()
@@ -526,7 +574,7 @@ pub fn validate(
         .filter(|s| !s.is_empty())
     {
         None | Some("auto") => crate::engine::generate::auto_scale(
-            &points,
+            canonical_points.as_deref().unwrap_or(&points),
             Some(crate::data::synth::prior_diagonal(
                 category.as_ref().map(|c| c.1.as_str()),
             )),
@@ -797,6 +845,7 @@ pub fn validate(
         w_free,
         repair,
         scale,
+        frame,
     };
     // The engine's own checks of the guidance the job will run with (the cameras' count,
     // range and place outside the points' box among them), at submission rather than at run.

@@ -203,6 +203,10 @@ struct SpecDoc {
     /// ... and without a scale hypothesis.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     scale: Option<f64>,
+    /// ... and with the scan in the canonical frame: `(up, yaw, translation)` of the scan's
+    /// frame when it was estimated at submission (`frame: auto`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    frame: Option<([f64; 3], f64, [f64; 3])>,
 }
 
 fn repair_off() -> String {
@@ -248,6 +252,7 @@ fn spec_to_row(s: &JobSpec) -> (String, Vec<u8>) {
         w_free: s.w_free,
         repair: s.repair.as_str().to_string(),
         scale: s.scale,
+        frame: s.frame.map(|f| (f.up.into(), f.yaw, f.translation.into())),
     };
     let mut blob = Vec::with_capacity(s.points.len() * 12);
     for p in &s.points {
@@ -309,6 +314,9 @@ fn spec_from_row(id: &str, json: &str, blob: &[u8]) -> Result<JobSpec, StoreErro
         w_free: d.w_free,
         repair,
         scale: d.scale,
+        frame: d
+            .frame
+            .and_then(|(up, yaw, t)| crate::frame::ScanFrame::new(up, yaw, t).ok()),
     })
 }
 

@@ -2,6 +2,7 @@
 //! reference sets and report writing they share live here.
 
 mod denoiser;
+mod frame;
 mod generative;
 mod guided;
 mod real;
@@ -12,6 +13,7 @@ use super::progress_bar;
 use anyhow::{Context, bail};
 use clap::Subcommand;
 use denoiser::EvalDenoiserArgs;
+use frame::EvalFrameArgs;
 use generative::EvalGenerativeArgs;
 use guided::EvalGuidedArgs;
 use physnap::data::dataset::load_object_meshes;
@@ -50,6 +52,10 @@ pub(crate) enum EvalCommand {
     /// axis and hinge errors, Chamfer/diag, sim-clean in MuJoCo, seconds; per object, per
     /// category and overall, for the prior, guided and best-of-N rows. Writes real.md/json.
     Real(Box<EvalRealArgs>),
+    /// The scan-frame estimate (`generate --frame auto`) on every scan of a benchmark set,
+    /// each moved by a random yaw and translation with +Z and with +Y up: yaw and floor
+    /// errors with and without the camera. No generation; seconds.
+    Frame(EvalFrameArgs),
 }
 
 /// Runs one `physnap eval …` subcommand.
@@ -61,6 +67,7 @@ pub(crate) fn run(command: EvalCommand) -> anyhow::Result<()> {
         EvalCommand::Reconstruction(a) => reconstruction::reconstruction(a),
         EvalCommand::Denoiser(a) => denoiser::denoiser(a),
         EvalCommand::Real(a) => real::eval_real(*a),
+        EvalCommand::Frame(a) => frame::eval_frame(a),
     }
 }
 

@@ -22,9 +22,13 @@ use serde_json::json;
 
 use physnap::data::categories::category_index;
 use physnap::data::dataset::load_object_meshes;
+use physnap::engine::frame::estimate;
 use physnap::engine::generate::{GenerateRequest, PartShapes};
 use physnap::engine::guidance::{GuidanceOptions, SdfField};
 use physnap::engine::schedule::Schedule;
+use physnap::eval::real::frame::{
+    MovedUp, frame_error, move_of, moved, to_truth, truth_to_estimate,
+};
 use physnap::eval::real::{
     GtObject, JobResult, JobSample, RowKind, RowSpec, ScanResult, best_of, draw_samples,
     object_metrics, report, row_specs,
@@ -110,6 +114,15 @@ pub struct EvalRealArgs {
     /// Joint repair and part removal, as `generate --repair`: on (default) or off.
     #[arg(long, env = "PHYSNAP_REPAIR", default_value = "on", value_parser = ["on", "off"])]
     repair: String,
+    /// The scans' frame: canonical (default: as recorded, in physnap's frame) or auto (each
+    /// scan moved into a user's frame by a random yaw and translation, `physnap eval frame`'s
+    /// move, with --frame-up up, and completed with `generate --frame auto`; the metrics are
+    /// computed after mapping the output back by the true move).
+    #[arg(long, env = "PHYSNAP_FRAME", default_value = "canonical", value_parser = ["canonical", "auto"])]
+    frame: String,
+    /// Up axis of the moved scans with --frame auto: z (only yaw and position unknown) or y.
+    #[arg(long, env = "PHYSNAP_FRAME_UP", default_value = "z", value_parser = ["z", "y"])]
+    frame_up: String,
     /// Sampler and guidance schedule.
     #[command(flatten)]
     sampling: SamplingArgs,
@@ -137,6 +150,7 @@ fn settings(a: &EvalRealArgs, rows: &[RowSpec]) -> serde_json::Value {
         "scan_camera": a.scan_camera,
         "repair": a.repair,
         "scale": a.scale,
+        "frame": if a.frame == "auto" { format!("auto, {} up", a.frame_up) } else { a.frame.clone() },
         "sampling": format!("{:?}", a.sampling),
     })
 }
@@ -292,6 +306,25 @@ pub fn eval_real(a: EvalRealArgs) -> anyhow::Result<()> {
             .with_context(|| format!("reading {}", scan.cloud.display()))?
             .points;
         let category = scan.category.clone().or_else(|| gt.object.category.clone());
+        // --frame auto: the scan (and its camera) in a user's frame, and the frame estimated
+        // from it as `generate --frame auto` does.
+        let camera = match (a.scan_camera.as_str(), scan.camera) {
+            ("use", Some(c)) => vec![c.map(|v| v as f32)],
+            _ => Vec::new(),
+        };
+        let framed = match MovedUp::parse(&a.frame_up).filter(|_| a.frame == "auto") {
+            None => None,
+            Some(up) => {
+                let m = move_of(&scan.id, a.seed, up);
+                let (p, c) = (moved(&m, &points), moved(&m, &camera));
+                let est = estimate(&p, up.vector(), &c).map_err(|e| e.to_string());
+                Some((m, p, c, est))
+            }
+        };
+        let frame_error = match &framed {
+            Some((m, _, _, Ok(e))) => Some(frame_error(m, &e.frame)),
+            _ => None,
+        };
         let mut jobs: Vec<JobResult> = Vec::new();
         let mut done = si * per_scan;
         for &aware in &blocks {
@@ -360,39 +393,61 @@ pub fn eval_real(a: EvalRealArgs) -> anyhow::Result<()> {
             } else {
                 Vec::new()
             };
+            let mut frame_refused = None;
             let guided = if n_guided > 0 {
-                let cameras = match (a.scan_camera.as_str(), scan.camera) {
-                    ("use", Some(c)) => vec![c.map(|v| v as f32)],
-                    _ => Vec::new(),
+                // The scan as the user gives it, and its frame.
+                let (given, cameras, frame) = match &framed {
+                    None => (points.clone(), camera.clone(), None),
+                    Some((_, p, c, Ok(e))) => (p.clone(), c.clone(), Some(e.frame)),
+                    Some((_, _, _, Err(why))) => {
+                        frame_refused = Some(format!("frame: {why}"));
+                        (Vec::new(), Vec::new(), None)
+                    }
                 };
-                let opts = a
-                    .sampling
-                    .guidance(points.clone(), [w_pc, w_pen, w_mob])
-                    .with_cameras(cameras, a.w_free);
-                opts.validate(schedule.len())?;
-                let scale = scale_of(
-                    &a.scale,
-                    &points,
-                    cat.map(|i| models.manifest.categories[i].as_str()),
-                )?;
-                let req = GenerateRequest {
-                    guidance: Some(opts),
-                    scale,
-                    category_guidance: a.sampling.category.weight(true),
-                    category_guidance_below: Some(a.sampling.category.below(true)),
-                    ..base.clone()
-                };
-                draw(&req, n_guided, &mut done)?
+                if frame_refused.is_some() {
+                    done += n_guided;
+                    Vec::new()
+                } else {
+                    let canonical = frame.map_or(given.clone(), |f| f.points_to_canonical(&given));
+                    let opts = a
+                        .sampling
+                        .guidance(given, [w_pc, w_pen, w_mob])
+                        .with_cameras(cameras, a.w_free);
+                    opts.validate(schedule.len())?;
+                    let scale = scale_of(
+                        &a.scale,
+                        &canonical,
+                        cat.map(|i| models.manifest.categories[i].as_str()),
+                    )?;
+                    let req = GenerateRequest {
+                        guidance: Some(opts),
+                        scale,
+                        frame,
+                        category_guidance: a.sampling.category.weight(true),
+                        category_guidance_below: Some(a.sampling.category.below(true)),
+                        ..base.clone()
+                    };
+                    draw(&req, n_guided, &mut done)?
+                }
             } else {
                 Vec::new()
             };
+            // Guided outputs come out in the estimated canonical frame: G maps the truth there.
+            let to_estimate = match &framed {
+                Some((m, _, _, Ok(e))) => Some(truth_to_estimate(m, &e.frame)),
+                _ => None,
+            };
             for r in mine {
-                let (samples, n) = match r.kind {
-                    RowKind::Prior => (&prior, 1),
-                    k => (&guided, k.samples()),
+                let (samples, n, g) = match r.kind {
+                    RowKind::Prior => (&prior, 1, None),
+                    k => (&guided, k.samples(), to_estimate),
                 };
+                if let (Some(why), false) = (&frame_refused, r.kind == RowKind::Prior) {
+                    jobs.push(failed_job(r, why));
+                    continue;
+                }
                 let dir = a.out.join("jobs").join(&scan.id).join(r.key());
-                jobs.push(job(r, samples, n, gt, &dir, meshing, a.seed ^ si as u64));
+                jobs.push(job(r, samples, n, gt, &dir, meshing, a.seed ^ si as u64, g));
             }
         }
         // MuJoCo on every exported job of the scan, in one call.
@@ -431,6 +486,7 @@ pub fn eval_real(a: EvalRealArgs) -> anyhow::Result<()> {
             points: points.len(),
             gt_joints: gt.movable_joints(),
             gt_revolute: gt.revolute_joints(),
+            frame_error,
             jobs,
         };
         write_json(&result_path, &scan_json(&r))?;
@@ -503,7 +559,10 @@ fn failed_job(row: RowSpec, why: &str) -> JobResult {
     }
 }
 
-/// One job from its samples (the first `n`): the best one exported to `dir` and scored.
+/// One job from its samples (the first `n`): the best one exported to `dir` (in the scan's
+/// frame, when it has one) and scored; `to_estimate` (with `--frame auto`) maps the true
+/// canonical frame onto the one the samples came out in.
+#[allow(clippy::too_many_arguments)]
 fn job(
     row: RowSpec,
     samples: &[JobSample],
@@ -512,6 +571,7 @@ fn job(
     dir: &Path,
     meshing: MeshingOptions,
     seed: u64,
+    to_estimate: Option<nalgebra::Isometry3<f64>>,
 ) -> JobResult {
     let t = Instant::now();
     let drawn: f64 = samples.iter().take(n).map(|s| s.seconds).sum();
@@ -536,6 +596,7 @@ fn job(
     r.d_pc = s.d_pc;
     let opts = ExportOptions {
         meshing,
+        frame: Some(g.frame),
         ..Default::default()
     };
     match export_dir_with_repairs(&g.object, &g.meshes, &g.repairs, dir, &opts) {
@@ -553,7 +614,13 @@ fn job(
                 hulls_clean: on_hulls.is_some_and(|h| h.clean),
                 hulls_worst_depth: on_hulls.map_or(f64::NAN, |h| h.worst_depth()),
             });
-            let m = object_metrics(&g.object, &g.meshes, &gt.object, &gt.meshes, seed);
+            let m = match to_estimate {
+                Some(t) => {
+                    let (o, meshes) = to_truth(&t, &g.object, &g.meshes);
+                    object_metrics(&o, &meshes, &gt.object, &gt.meshes, seed)
+                }
+                None => object_metrics(&g.object, &g.meshes, &gt.object, &gt.meshes, seed),
+            };
             if m.chamfer_diag.is_finite() {
                 r.error = None;
             } else {

@@ -16,6 +16,7 @@
 //! Failed jobs (every sample diverged or failed, no surface, an export MuJoCo could not load)
 //! count as misses in every share; in the Chamfer median a failed job counts as +∞.
 
+pub mod frame;
 pub mod metrics;
 pub mod report;
 
@@ -170,7 +171,12 @@ pub fn draw_samples(
                 let mut g = v.remove(0);
                 g.index = k;
                 g.object.name = format!("sample_{k:03}");
-                let cameras = req.guidance.as_ref().map_or(&[][..], |o| &o.cameras[..]);
+                // The sample is canonical: rank it against the scan moved there.
+                let canonical = crate::engine::generate::canonical_guidance(req);
+                let (points, cameras) = match &canonical {
+                    Some(o) => (&o.points[..], &o.cameras[..]),
+                    None => (points, &[][..]),
+                };
                 let terms = crate::eval::rank::sample_terms(
                     &g.object, &g.meshes, points, cameras, one.seed,
                 );
@@ -296,6 +302,9 @@ pub struct ScanResult {
     pub gt_joints: usize,
     /// GT revolute joints (the pivot share's population).
     pub gt_revolute: usize,
+    /// With `eval real --frame auto`: how far the frame estimated for the moved scan was from
+    /// the truth (None: canonical input, or the estimate refused the scan).
+    pub frame_error: Option<frame::FrameError>,
     /// One per row.
     pub jobs: Vec<JobResult>,
 }
@@ -501,6 +510,7 @@ mod tests {
             points: 1000,
             gt_joints: 1,
             gt_revolute: 1,
+            frame_error: None,
             jobs,
         };
         let a = scan("a", vec![job(RowKind::Guided, Some(m.clone()), true)]);

@@ -96,6 +96,21 @@ pub fn markdown(title: &str, scans: &[ScanResult]) -> String {
         scans.len(),
         objects
     );
+    let errors: Vec<_> = scans.iter().filter_map(|s| s.frame_error).collect();
+    if !errors.is_empty() {
+        let ok = errors.iter().filter(|e| e.yaw_deg <= 10.0).count();
+        let median = |mut v: Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+        md += &format!(
+            "Scans moved into a user's frame (`--frame auto`): yaw within 10° on {}, median yaw error {:.1}°, median floor error {:.3} m; {} scans refused by the estimate.\n\n",
+            pct(ok, errors.len()),
+            median(errors.iter().map(|e| e.yaw_deg).collect()),
+            median(errors.iter().map(|e| e.floor_m).collect()),
+            scans.len() - errors.len(),
+        );
+    }
     let keys = row_keys(scans);
     md += &format!("| row {HEADER}\n|---|---|---|---|---|---|---|---|---|---|\n");
     for k in &keys {

@@ -532,3 +532,95 @@ fn scale_defaults_to_auto_for_a_known_category_and_is_resolved_at_submission() {
         );
     }
 }
+
+#[test]
+fn frame_auto_is_estimated_at_submission_and_bad_frames_are_refused() {
+    // A ray-cast scan of the example cabinet, turned to +Y up and yawed by 30°, shifted.
+    let obj = crate::fixtures::cabinet();
+    let meshes =
+        crate::mesh::mesh_parts(&obj, None, &crate::mesh::MeshingOptions { resolution: 32 })
+            .unwrap();
+    let scan = crate::data::scan::scan(
+        &meshes,
+        &mut crate::data::rng::Rng::new(3),
+        &crate::data::scan::ScanOptions::default(),
+    )
+    .unwrap();
+    let m = crate::eval::real::frame::move_of("spec", 1, crate::eval::real::frame::MovedUp::Y);
+    let moved = crate::eval::real::frame::moved(&m, &scan.points);
+    let eye = crate::eval::real::frame::moved(
+        &m,
+        &[[
+            scan.camera.eye.x as f32,
+            scan.camera.eye.y as f32,
+            scan.camera.eye.z as f32,
+        ]],
+    )[0];
+    let points = PointsInput::Triples(
+        moved
+            .iter()
+            .map(|p| [p[0] as f64, p[1] as f64, p[2] as f64])
+            .collect(),
+    );
+    let run = |frame: Option<&str>, up: Option<[f64; 3]>, pts: PointsInput| {
+        validate(
+            &JobInput {
+                points: Some(pts),
+                category: Some("Door".into()),
+                camera: Some(CameraInput::One(eye.iter().map(|&c| c as f64).collect())),
+                frame: frame.map(str::to_string),
+                up,
+                ..Default::default()
+            },
+            &caps(),
+            &Limits::default(),
+            1,
+        )
+    };
+    // Canonical (the default) keeps no frame.
+    assert_eq!(run(None, None, points.clone()).unwrap().frame, None);
+    let spec = run(Some("auto"), Some([0.0, 1.0, 0.0]), points.clone()).unwrap();
+    let f = spec.frame.expect("estimated at submission");
+    let err = crate::eval::real::frame::frame_error(&m, &f);
+    assert!(err.yaw_deg < 10.0, "{err:?}");
+    // The scale is the canonical scan's: the same as for the unmoved scan.
+    let canonical = PointsInput::Triples(
+        scan.points
+            .iter()
+            .map(|p| [p[0] as f64, p[1] as f64, p[2] as f64])
+            .collect(),
+    );
+    let s0 = run(None, None, canonical).unwrap().scale.unwrap();
+    assert!(
+        (spec.scale.unwrap() - s0).abs() < 0.05 * s0,
+        "{:?} vs {s0}",
+        spec.scale
+    );
+    // Refusals name the field, the limit and the value.
+    let e = run(Some("auto"), Some([0.0, 0.0, 0.0]), points.clone()).unwrap_err();
+    assert_eq!(e.field, "up");
+    assert!(
+        e.limit.contains("non-zero") && e.value.contains("0,0,0"),
+        "{e:?}"
+    );
+    let e = run(Some("auto"), Some([f64::NAN, 1.0, 0.0]), points.clone()).unwrap_err();
+    assert_eq!(e.field, "up");
+    let e = run(None, Some([0.0, 1.0, 0.0]), points.clone()).unwrap_err();
+    assert_eq!(
+        (e.field.as_str(), e.limit.as_str()),
+        ("up", "given only with frame \"auto\"")
+    );
+    let e = run(Some("sideways"), None, points).unwrap_err();
+    assert_eq!(e.field, "frame");
+    // A flat scan (all at one height) cannot be stood on a floor.
+    let flat = PointsInput::Triples(
+        (0..200)
+            .map(|i| [(i % 20) as f64 * 0.02, (i / 20) as f64 * 0.02, 0.3])
+            .collect(),
+    );
+    let e = run(Some("auto"), None, flat).unwrap_err();
+    assert!(
+        e.field == "points" && e.limit.contains("frame canonical"),
+        "{e:?}"
+    );
+}

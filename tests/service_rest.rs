@@ -1116,6 +1116,72 @@ async fn cameras_w_free_and_repair_reach_the_job_and_its_ranking() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn frame_auto_is_estimated_at_submission_and_reaches_the_artefacts() {
+    let s = start(Opts::default()).await;
+    let c = client();
+    // Three faces of a 0.6 × 0.5 × 0.8 m box seen from the front-left (front −X, +Z up), a
+    // metre off the origin: the frame is estimated at submission.
+    let mut pts = Vec::new();
+    for i in 0..12 {
+        for j in 0..12 {
+            let (u, v) = (i as f64 / 11.0, j as f64 / 11.0);
+            pts.push(json!([1.0 - 0.3, -0.25 + 0.5 * u, 0.8 * v]));
+            pts.push(json!([1.0 - 0.3 + 0.6 * u, -0.25, 0.8 * v]));
+            pts.push(json!([1.0 - 0.3 + 0.6 * u, -0.25 + 0.5 * v, 0.8]));
+        }
+    }
+    let body = json!({"points": pts, "seed": 5, "resolution": 8, "sampler": "ddim",
+                      "steps": 10, "n_g": 5, "refine_steps": 2, "guidance_max_step": 0.05,
+                      "camera": [-1.5, -1.5, 1.5], "frame": "auto", "up": [0.0, 0.0, 1.0]});
+    let r = submit(&c, &s.url("/v1/jobs"), body).await;
+    assert_eq!(r.status(), 202);
+    let loc = r.headers()["location"].to_str().unwrap().to_string();
+    let job: Value = r.json().await.unwrap();
+    let f = &job["request"]["frame"];
+    assert_eq!(f["mode"], "auto", "{job:#}");
+    let yaw = f["yaw_degrees"].as_f64().unwrap();
+    assert!(yaw.min(360.0 - yaw) < 5.0, "{f}");
+    // The box is centred in x/y and stood on the floor.
+    let t = f["translation"].as_array().unwrap();
+    assert!((t[0].as_f64().unwrap() + 1.0).abs() < 0.05, "{f}");
+    assert!(t[2].as_f64().unwrap().abs() < 0.05, "{f}");
+    let j = wait_state(&c, &s.url(&loc), &["SUCCEEDED", "FAILED"]).await;
+    assert_eq!(j["state"], "SUCCEEDED", "{j:#}");
+    let ranking = json_artifact(&c, &s, &loc, "ranking.json").await;
+    assert_eq!(ranking["frame"]["mode"], "auto", "{ranking:#}");
+    assert!(ranking["frame"]["floor"].is_number(), "{ranking:#}");
+    let object = json_artifact(&c, &s, &loc, "object.json").await;
+    assert_eq!(object["frame"]["mode"], "auto", "{object:#}");
+    assert!(object["scan_frame"]["parts"].is_array(), "{object:#}");
+    // Bad frames are refused naming the field, the limit and the value.
+    let npy = physnap::pointcloud::PointCloud { points: cloud(64) }
+        .to_bytes(physnap::pointcloud::Format::Npy);
+    for (query, field, value) in [
+        ("frame=auto&up=0,0,0", "up", "0,0,0"),
+        ("frame=auto&up=1,2", "up", "\"1,2\""),
+        ("up=0,1,0", "up", "[0.0, 1.0, 0.0]"),
+        ("frame=tilted", "frame", "\"tilted\""),
+    ] {
+        let r = c
+            .post(s.url(&format!("/v1/jobs?{query}")))
+            .header("content-type", "application/x-npy")
+            .body(npy.clone())
+            .send()
+            .await
+            .unwrap();
+        let p = problem(r, 422).await;
+        let e = &p["errors"][0];
+        assert_eq!(
+            (e["field"].as_str(), e["value"].as_str()),
+            (Some(field), Some(value)),
+            "{query}: {p}"
+        );
+        assert!(!e["limit"].as_str().unwrap().is_empty(), "{p}");
+    }
+    s.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn guidance_and_sampler_fields_are_validated() {
     let s = start(Opts::default()).await;
     let c = client();

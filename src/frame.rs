@@ -60,6 +60,28 @@ pub fn up_rotation(up: &Vector3<f64>) -> Rotation3<f64> {
     }
 }
 
+/// `points` moved by `iso` (computed in f64).
+pub fn transform_points(iso: &Isometry3<f64>, points: &[[f32; 3]]) -> Vec<[f32; 3]> {
+    points
+        .iter()
+        .map(|p| {
+            let q = iso * Point3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+            [q.x as f32, q.y as f32, q.z as f32]
+        })
+        .collect()
+}
+
+/// `x,y,z` (three comma-separated numbers, e.g. an `--up` flag or query value); None when it
+/// is not three numbers (finiteness is [`check_up`]'s).
+pub fn parse_xyz(v: &str) -> Option<[f64; 3]> {
+    let c: Vec<f64> = v
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .ok()?;
+    (c.len() == 3).then(|| [c[0], c[1], c[2]])
+}
+
 impl ScanFrame {
     /// The identity: the scan is already canonical.
     pub fn canonical() -> ScanFrame {
@@ -110,14 +132,7 @@ impl ScanFrame {
 
     /// Points of the scan's frame in the canonical frame.
     pub fn points_to_canonical(&self, points: &[[f32; 3]]) -> Vec<[f32; 3]> {
-        let iso = self.to_canonical();
-        points
-            .iter()
-            .map(|p| {
-                let q = iso * Point3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-                [q.x as f32, q.y as f32, q.z as f32]
-            })
-            .collect()
+        transform_points(&self.to_canonical(), points)
     }
 
     /// The canonical → scan transform as a row-major 4×4 matrix.

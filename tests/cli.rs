@@ -410,12 +410,17 @@ const WEIGHTS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/weights");
 
 /// A short guided `generate` of the example scan with extra flags.
 fn generate(out: &Path, extra: &[&str]) -> Output {
+    physnap(&generate_args(out, SCAN, extra), &[])
+}
+
+/// The arguments of a short guided `generate` of `points` with extra flags.
+fn generate_args<'a>(out: &'a Path, points: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
     let mut args = vec![
         "generate",
         "--weights",
         WEIGHTS,
         "--points",
-        SCAN,
+        points,
         "--category",
         "Microwave",
         "--steps",
@@ -428,7 +433,7 @@ fn generate(out: &Path, extra: &[&str]) -> Output {
         out.to_str().unwrap(),
     ];
     args.extend_from_slice(extra);
-    physnap(&args, &[])
+    args
 }
 
 #[test]
@@ -689,25 +694,7 @@ fn frame_auto_finds_the_scans_frame_and_returns_the_model_in_it() {
     );
     let camera = format!("{},{},{}", eye[0], eye[1], eye[2]);
     let out = dir.path().join("g");
-    let mut args = vec![
-        "generate",
-        "--weights",
-        WEIGHTS,
-        "--points",
-        &cloud,
-        "--category",
-        "Microwave",
-        "--steps",
-        "8",
-        "--guidance-refine-steps",
-        "2",
-        "--resolution",
-        "16",
-        "--out",
-        out.to_str().unwrap(),
-        "--camera",
-        &camera,
-    ];
+    let mut args = generate_args(&out, &cloud, &["--camera", &camera]);
     let o = physnap(&args, &[("PHYSNAP_FRAME", "auto"), ("PHYSNAP_UP", "0,1,0")]);
     assert!(o.status.success(), "{}", stderr(&o));
     let sample = out.join("sample_000");

@@ -474,7 +474,7 @@ async fn cameras_w_free_and_repair_reach_the_job_and_its_ranking() {
         "{ranking:#}"
     );
     // INVALID_ARGUMENT names the repeated field's entry, the limit and the value.
-    let cases: [(pb::JobSpec, &str, &str); 4] = [
+    let cases: [(pb::JobSpec, &str, &str); 6] = [
         (
             pb::JobSpec {
                 camera: vec![cam(-2.0, 0.0, 0.5), cam(0.0, 0.0, 0.5)],
@@ -506,6 +506,24 @@ async fn cameras_w_free_and_repair_reach_the_job_and_its_ranking() {
             },
             "repair",
             "\"on\" or \"off\"",
+        ),
+        // The frame fields reach the estimate: a zero up is refused by name.
+        (
+            pb::JobSpec {
+                frame: "auto".into(),
+                up: Some(cam(0.0, 0.0, 0.0)),
+                ..quick.clone()
+            },
+            "up",
+            "non-zero",
+        ),
+        (
+            pb::JobSpec {
+                frame: "sideways".into(),
+                ..quick.clone()
+            },
+            "frame",
+            "\"canonical\" or \"auto\"",
         ),
     ];
     for (bad, field, limit) in cases {

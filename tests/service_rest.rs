@@ -939,6 +939,33 @@ async fn physics_refinement_steps_are_a_job_setting_counted_in_progress() {
     s.shutdown().await;
 }
 
+/// Each `(query, field, value)`: an NPY upload with that query string is refused with 422,
+/// its first error naming the field and the value as written, with a limit.
+async fn assert_query_refused(
+    c: &reqwest::Client,
+    s: &support::TestServer,
+    npy: &[u8],
+    cases: &[(&str, &str, &str)],
+) {
+    for &(query, field, value) in cases {
+        let r = c
+            .post(s.url(&format!("/v1/jobs?{query}")))
+            .header("content-type", "application/x-npy")
+            .body(npy.to_vec())
+            .send()
+            .await
+            .unwrap();
+        let p = problem(r, 422).await;
+        let e = &p["errors"][0];
+        assert_eq!(
+            (e["field"].as_str(), e["value"].as_str()),
+            (Some(field), Some(value)),
+            "{query}: {p}"
+        );
+        assert!(!e["limit"].as_str().unwrap().is_empty(), "{p}");
+    }
+}
+
 async fn json_artifact(
     c: &reqwest::Client,
     s: &support::TestServer,
@@ -1085,7 +1112,7 @@ async fn cameras_w_free_and_repair_reach_the_job_and_its_ranking() {
         "{req}"
     );
     // Bad cameras in the query string are named as written.
-    for (query, field, value) in [
+    let cases = [
         ("camera=1,2", "camera", "[1, 2]"),
         ("camera=up", "camera", "\"up\""),
         (
@@ -1095,23 +1122,8 @@ async fn cameras_w_free_and_repair_reach_the_job_and_its_ranking() {
         ),
         ("camera=0,0,0.5", "camera", "[0.0, 0.0, 0.5]"),
         ("repair=sometimes", "repair", "\"sometimes\""),
-    ] {
-        let r = c
-            .post(s.url(&format!("/v1/jobs?{query}")))
-            .header("content-type", "application/x-npy")
-            .body(npy.clone())
-            .send()
-            .await
-            .unwrap();
-        let p = problem(r, 422).await;
-        let e = &p["errors"][0];
-        assert_eq!(
-            (e["field"].as_str(), e["value"].as_str()),
-            (Some(field), Some(value)),
-            "{query}: {p}"
-        );
-        assert!(!e["limit"].as_str().unwrap().is_empty(), "{p}");
-    }
+    ];
+    assert_query_refused(&c, &s, &npy, &cases).await;
     s.shutdown().await;
 }
 
@@ -1156,28 +1168,13 @@ async fn frame_auto_is_estimated_at_submission_and_reaches_the_artefacts() {
     // Bad frames are refused naming the field, the limit and the value.
     let npy = physnap::pointcloud::PointCloud { points: cloud(64) }
         .to_bytes(physnap::pointcloud::Format::Npy);
-    for (query, field, value) in [
+    let cases = [
         ("frame=auto&up=0,0,0", "up", "0,0,0"),
         ("frame=auto&up=1,2", "up", "\"1,2\""),
         ("up=0,1,0", "up", "[0.0, 1.0, 0.0]"),
         ("frame=tilted", "frame", "\"tilted\""),
-    ] {
-        let r = c
-            .post(s.url(&format!("/v1/jobs?{query}")))
-            .header("content-type", "application/x-npy")
-            .body(npy.clone())
-            .send()
-            .await
-            .unwrap();
-        let p = problem(r, 422).await;
-        let e = &p["errors"][0];
-        assert_eq!(
-            (e["field"].as_str(), e["value"].as_str()),
-            (Some(field), Some(value)),
-            "{query}: {p}"
-        );
-        assert!(!e["limit"].as_str().unwrap().is_empty(), "{p}");
-    }
+    ];
+    assert_query_refused(&c, &s, &npy, &cases).await;
     s.shutdown().await;
 }
 

@@ -123,6 +123,17 @@ pub struct SubmitArgs {
     /// Scale hypothesis: auto, off or a factor (server default: auto).
     #[arg(long, env = "PHYSNAP_SCALE")]
     scale: Option<String>,
+    /// The scan's frame: canonical or auto (server default: canonical; see `generate --frame`).
+    #[arg(long, env = "PHYSNAP_FRAME", value_parser = ["canonical", "auto"])]
+    frame: Option<String>,
+    /// The scan's up direction x,y,z with --frame auto (server default: 0,0,1).
+    #[arg(
+        long,
+        env = "PHYSNAP_UP",
+        value_name = "X,Y,Z",
+        allow_hyphen_values = true
+    )]
+    up: Option<String>,
     /// Idempotency key (a retry with the same key returns the same job).
     #[arg(long, env = "PHYSNAP_REQUEST_ID", default_value = "")]
     request_id: String,
@@ -218,6 +229,13 @@ pub fn submit(a: SubmitArgs) -> anyhow::Result<()> {
             w_free: a.w_free,
             repair: a.repair.clone().unwrap_or_default(),
             scale: a.scale.clone().unwrap_or_default(),
+            frame: a.frame.clone().unwrap_or_default(),
+            up: a
+                .up
+                .as_deref()
+                .map(super::generate::parse_up)
+                .transpose()?
+                .map(|[x, y, z]| pb::Vec3 { x, y, z }),
             ..Default::default()
         };
         let job = cl

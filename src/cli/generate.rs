@@ -121,14 +121,8 @@ pub(crate) struct GenerateArgs {
 
 /// `--up x,y,z` as a vector (the estimate checks it is finite and non-zero).
 pub(crate) fn parse_up(v: &str) -> anyhow::Result<[f64; 3]> {
-    let c: Vec<f64> = v
-        .split(',')
-        .map(|x| x.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .ok()
-        .filter(|c: &Vec<f64>| c.len() == 3)
-        .with_context(|| format!("invalid --up {v:?}: expected x,y,z (three numbers)"))?;
-    Ok([c[0], c[1], c[2]])
+    physnap::frame::parse_xyz(v)
+        .with_context(|| format!("invalid --up {v:?}: expected x,y,z (three numbers)"))
 }
 
 /// The `--frame` / `--up` flags for the scan of `guidance`: None for canonical, else the

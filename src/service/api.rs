@@ -418,18 +418,11 @@ pub struct FrameView {
 
 /// An `up` query value, `x,y,z`, as numbers (the engine checks they are finite and not all 0).
 fn parse_up(v: &str) -> Result<[f64; 3], Violation> {
-    let c: Vec<f64> = v
-        .split(',')
-        .map(|x| x.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .ok()
-        .filter(|c: &Vec<f64>| c.len() == 3)
-        .ok_or_else(|| Violation {
-            field: "up".into(),
-            limit: "x,y,z: three numbers".into(),
-            value: format!("{v:?}"),
-        })?;
-    Ok([c[0], c[1], c[2]])
+    crate::frame::parse_xyz(v).ok_or_else(|| Violation {
+        field: "up".into(),
+        limit: "x,y,z: three numbers".into(),
+        value: format!("{v:?}"),
+    })
 }
 
 /// The validated request, echoed back (seed always set).

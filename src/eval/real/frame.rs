@@ -98,13 +98,7 @@ pub fn exact_frame(m: &Isometry3<f64>, up: MovedUp) -> ScanFrame {
 
 /// Points moved by `m`.
 pub fn moved(m: &Isometry3<f64>, points: &[[f32; 3]]) -> Vec<[f32; 3]> {
-    points
-        .iter()
-        .map(|p| {
-            let q = m * Point3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-            [q.x as f32, q.y as f32, q.z as f32]
-        })
-        .collect()
+    crate::frame::transform_points(m, points)
 }
 
 /// How far an estimated frame is from the truth (module docs).

@@ -247,7 +247,7 @@ pub fn scan_json(s: &ScanResult) -> Value {
         "camera": s.camera, "points": s.points, "gt_joints": s.gt_joints,
         "gt_revolute": s.gt_revolute,
         "frame_error": s.frame_error.map(|e| json!({
-            "yaw_deg": e.yaw_deg, "floor_m": e.floor_m,
+            "yaw_deg": e.yaw_deg, "floor_m": e.floor_m, "offset_m": e.offset_m,
         })),
         "jobs": s.jobs.iter().map(job_json).collect::<Vec<_>>(),
     })
@@ -362,9 +362,11 @@ pub fn read_scan_result(path: &Path) -> Result<ScanResult, RealFileError> {
             v["frame_error"]["yaw_deg"].as_f64(),
             v["frame_error"]["floor_m"].as_f64(),
         ) {
-            (Some(yaw_deg), Some(floor_m)) => {
-                Some(crate::eval::real::frame::FrameError { yaw_deg, floor_m })
-            }
+            (Some(yaw_deg), Some(floor_m)) => Some(crate::eval::real::frame::FrameError {
+                yaw_deg,
+                floor_m,
+                offset_m: v["frame_error"]["offset_m"].as_f64().unwrap_or(f64::NAN),
+            }),
             _ => None,
         },
         jobs,

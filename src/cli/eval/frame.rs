@@ -48,13 +48,13 @@ pub fn eval_frame(a: EvalFrameArgs) -> anyhow::Result<()> {
     let mut rows = Vec::new();
     let mut per_scan = Vec::new();
     println!(
-        "| up | camera | scans | yaw ≤ {YAW_OK_DEG}° | yaw error, median | floor error, median (m) | refused |"
+        "| up | camera | scans | yaw ≤ {YAW_OK_DEG}° | yaw error, median | floor error, median (m) | origin offset, median (m) | refused |"
     );
-    println!("|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|");
     for up in [MovedUp::Z, MovedUp::Y] {
         for use_camera in [true, false] {
             let (mut ok, mut n, mut refused) = (0usize, 0usize, 0usize);
-            let (mut yaws, mut floors) = (Vec::new(), Vec::new());
+            let (mut yaws, mut floors, mut offsets) = (Vec::new(), Vec::new(), Vec::new());
             for s in &scans {
                 if use_camera && s.camera.is_none() {
                     continue;
@@ -74,9 +74,11 @@ pub fn eval_frame(a: EvalFrameArgs) -> anyhow::Result<()> {
                         ok += usize::from(err.yaw_deg <= YAW_OK_DEG);
                         yaws.push(err.yaw_deg);
                         floors.push(err.floor_m);
+                        offsets.push(err.offset_m);
                         per_scan.push(json!({
                             "scan": s.id, "up": up.as_str(), "camera": use_camera,
                             "yaw_error_deg": err.yaw_deg, "floor_error_m": err.floor_m,
+                            "offset_m": err.offset_m,
                             "chosen_by": e.source.as_str(), "plane_share": e.plane_share,
                             "camera_azimuth_deg": s.camera.map(|c| c[1].atan2(c[0]).to_degrees().rem_euclid(360.0)),
                             "frame": physnap::io::verdict::frame_json(&e),
@@ -97,8 +99,9 @@ pub fn eval_frame(a: EvalFrameArgs) -> anyhow::Result<()> {
             };
             let share = ok as f64 / n.max(1) as f64;
             let (ym, fm) = (median(&mut yaws), median(&mut floors));
+            let om = median(&mut offsets);
             println!(
-                "| +{} | {} | {n} | {:.0} % ({ok}) | {ym:.1}° | {fm:.4} | {refused} |",
+                "| +{} | {} | {n} | {:.0} % ({ok}) | {ym:.1}° | {fm:.4} | {om:.4} | {refused} |",
                 up.as_str().to_uppercase(),
                 if use_camera { "yes" } else { "no" },
                 100.0 * share
@@ -106,6 +109,7 @@ pub fn eval_frame(a: EvalFrameArgs) -> anyhow::Result<()> {
             rows.push(json!({
                 "up": up.as_str(), "camera": use_camera, "scans": n, "yaw_ok": ok,
                 "yaw_ok_share": share, "yaw_median_deg": ym, "floor_median_m": fm,
+                "offset_median_m": om,
                 "refused": refused,
             }));
         }

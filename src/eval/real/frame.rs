@@ -5,7 +5,7 @@
 //! M = T(t) · Q(up) · Rz(ψ),  ψ ~ U[0°, 360°),  t ~ U[−2, 2]³ m,   Q(+Z) = I,  Q(+Y): +Z ↦ +Y
 //! G = F ∘ M   (true canonical → estimated canonical; the identity when F is exact)
 //! yaw error   = the rotation angle of G (degrees)
-//! floor error = |G(0).z| (metres)
+//! floor error = |G(0).z| (metres),  offset = |G(0)| in x/y (metres)
 //! ```
 //!
 //! Why it exists: "finds the frame" has to be measured one way in `eval frame` (the estimate
@@ -108,6 +108,8 @@ pub struct FrameError {
     pub yaw_deg: f64,
     /// |G(0).z|, metres.
     pub floor_m: f64,
+    /// |G(0)| in x/y: how far the estimated origin is from the asset's, metres.
+    pub offset_m: f64,
 }
 
 /// G = F ∘ M: true canonical → estimated canonical.
@@ -121,6 +123,7 @@ pub fn frame_error(m: &Isometry3<f64>, f: &ScanFrame) -> FrameError {
     FrameError {
         yaw_deg: g.rotation.angle().to_degrees(),
         floor_m: g.translation.vector.z.abs(),
+        offset_m: g.translation.vector.xy().norm(),
     }
 }
 

@@ -12,7 +12,8 @@
 //!              circular mean of 4φ near the peak; the planes within BOX_TOLERANCE_DEG of it
 //!              (mod 90°) are the box's faces; with under MIN_PLANE_SHARE of the points on
 //!              them (a view from high above sees mostly the top), yaw₀ is the smallest
-//!              rectangle around the footprint instead, if it is one (MIN_RECTANGULARITY);
+//!              rectangle around the footprint instead, if it is one (MIN_RECTANGULARITY,
+//!              MIN_RECTANGULARITY_WITH_CAMERA with a camera);
 //!              a round object has no yaw of its own: its camera decides
 //! 5. the four hypotheses k·90° − yaw₀ put one of the four box faces at the front (−X); each
 //!    scores  face share (the share of vertical-plane points on that face's side of the box)
@@ -20,7 +21,8 @@
 //!            behind the box's side: a front's doors sit in a frame under handles, a side
 //!            panel is flat)
 //!          + CAMERA_WEIGHT · cos(angle between the face's normal and the camera's side)
-//!    (a face the camera looks at from more than 75° away is ruled out)
+//!    (a face the camera looks at from more than 75° away is ruled out; the first two terms
+//!    count in full from MIN_PLANE_SHARE of the points on the box's planes, less below)
 //!    and the best one wins (ties: the lower k)
 //! 6. translation: the rotated scan's box centred in x/y, the floor at z = 0
 //! ```
@@ -71,6 +73,10 @@ pub const MIN_FACE_POINTS: usize = 10;
 /// A footprint is a rectangle (it has a yaw) when its convex hull fills this share of its
 /// smallest enclosing rectangle (a disc fills π/4 ≈ 0.785).
 pub const MIN_RECTANGULARITY: f64 = 0.88;
+/// With a camera a footprint filling this share is taken as a rectangle: the camera then picks
+/// its front side, and a round object, which has no yaw of its own, loses nothing by it (a
+/// stove's knobs and burners leave its footprint ≈ 0.8 full).
+pub const MIN_RECTANGULARITY_WITH_CAMERA: f64 = 0.75;
 
 /// Weight of the camera's side against the face share (module docs).
 pub const CAMERA_WEIGHT: f64 = 1.0;
@@ -235,7 +241,7 @@ fn dominant_yaw(dirs: &[f64]) -> f64 {
 
 /// The yaw (mod 90°, in (−π/4, π/4]) of the smallest rectangle around the points' footprint
 /// (rotating calipers over its convex hull); None when the footprint is not rectangular.
-fn footprint_yaw(points: &[Vector3<f64>]) -> Option<f64> {
+fn footprint_yaw(points: &[Vector3<f64>], min_rectangularity: f64) -> Option<f64> {
     let mut pts: Vec<[f64; 2]> = points.iter().map(|p| [p.x, p.y]).collect();
     pts.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
     pts.dedup();
@@ -293,7 +299,7 @@ fn footprint_yaw(points: &[Vector3<f64>]) -> Option<f64> {
             best = (rect, theta);
         }
     }
-    if !(best.0 > 0.0 && area / best.0 >= MIN_RECTANGULARITY) {
+    if !(best.0 > 0.0 && area / best.0 >= min_rectangularity) {
         return None;
     }
     let q = std::f64::consts::FRAC_PI_2;
@@ -400,7 +406,14 @@ pub fn estimate(
     };
     let (yaw0, by_planes) = match from_planes.filter(|&y| share_of(y) >= MIN_PLANE_SHARE) {
         Some(y) => (Some(y), true),
-        None => (footprint_yaw(&lifted), false),
+        None => {
+            let min = if cameras.is_empty() {
+                MIN_RECTANGULARITY
+            } else {
+                MIN_RECTANGULARITY_WITH_CAMERA
+            };
+            (footprint_yaw(&lifted, min), false)
+        }
     };
     let planar: Vec<(Vector3<f64>, f64)> = match yaw0 {
         Some(y) => planar
@@ -510,6 +523,9 @@ pub fn estimate(
         })
         .unzip();
     let relief_total: f64 = reliefs.iter().sum();
+    // The faces' say grows with the points on them: full from MIN_PLANE_SHARE of the points
+    // on the box's planes (a footprint's yaw from a view of the top has few).
+    let evidence = (plane_share / MIN_PLANE_SHARE).min(1.0);
     let total = counts.iter().sum::<f64>().max(1.0);
     let hypotheses: Vec<Hypothesis> = faces
         .iter()
@@ -537,7 +553,8 @@ pub fn estimate(
                 score: if camera.is_some_and(|c| c < MIN_CAMERA_COS) {
                     f64::NEG_INFINITY
                 } else {
-                    face_share + RELIEF_WEIGHT * relief + CAMERA_WEIGHT * camera.unwrap_or(0.0)
+                    evidence * (face_share + RELIEF_WEIGHT * relief)
+                        + CAMERA_WEIGHT * camera.unwrap_or(0.0)
                 },
             }
         })
@@ -686,10 +703,32 @@ mod tests {
             e.contains("vertical planes") && e.contains("frame canonical"),
             "{e}"
         );
+        // With one, its (round) footprint's rectangle is taken, the face nearest the camera
+        // at the front.
         let e = estimate(&ball, [0.0, 0.0, 1.0], &[[-2.0, 0.0, 1.0]]).unwrap();
-        assert_eq!(e.source, YawSource::Camera);
+        assert_eq!(e.source, YawSource::PlanesAndCamera);
         let yaw = e.frame.yaw.to_degrees();
-        assert!(yaw.min(360.0 - yaw) < 1.0, "{yaw}");
+        assert!(yaw.min(360.0 - yaw) <= 45.0, "{yaw}");
+        // Points filling a triangular prism: no planar neighbourhoods and a footprint half its
+        // rectangle. The camera alone decides, the front square to it.
+        let prism: Vec<[f32; 3]> = (0..600)
+            .map(|_| {
+                let (mut u, mut v) = (rng.uniform(), rng.uniform());
+                if u + v > 1.0 {
+                    (u, v) = (1.0 - u, 1.0 - v);
+                }
+                [
+                    (0.6 * u) as f32,
+                    (0.6 * v) as f32,
+                    rng.range(0.0, 0.5) as f32,
+                ]
+            })
+            .collect();
+        let e = estimate(&prism, [0.0, 0.0, 1.0], &[[-2.0, 0.2, 1.0]]).unwrap();
+        assert_eq!(e.source, YawSource::Camera);
+        assert!(e.hypotheses.is_empty());
+        let yaw = e.frame.yaw.to_degrees();
+        assert!(yaw.min(360.0 - yaw) < 5.0, "{yaw}");
         let e = estimate(&points[..10], [0.0, 0.0, 1.0], &[])
             .unwrap_err()
             .to_string();

@@ -230,13 +230,26 @@ fn dominant_yaw(dirs: &[f64]) -> f64 {
     } else {
         s.atan2(c) / 4.0
     };
-    // Into (−π/4, π/4].
+    fold_quarter(yaw)
+}
+
+/// An angle mod 90°, into (−π/4, π/4].
+fn fold_quarter(a: f64) -> f64 {
     let q = std::f64::consts::FRAC_PI_2;
-    let mut y = yaw.rem_euclid(q);
-    if y > q / 2.0 {
-        y -= q;
+    let y = a.rem_euclid(q);
+    if y > q / 2.0 { y - q } else { y }
+}
+
+/// The x/y box (lo, hi) of `points`; (+∞, −∞) for none.
+fn xy_bounds(points: impl IntoIterator<Item = [f64; 2]>) -> ([f64; 2], [f64; 2]) {
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in points {
+        for k in 0..2 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
     }
-    y
+    (lo, hi)
 }
 
 /// The yaw (mod 90°, in (−π/4, π/4]) of the smallest rectangle around the points' footprint
@@ -286,14 +299,10 @@ fn footprint_yaw(points: &[Vector3<f64>], min_rectangularity: f64) -> Option<f64
         let (a, b) = (hull[i], hull[(i + 1) % hull.len()]);
         let theta = (b[1] - a[1]).atan2(b[0] - a[0]);
         let (c, s) = (theta.cos(), theta.sin());
-        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for p in &hull {
-            let q = [c * p[0] + s * p[1], -s * p[0] + c * p[1]];
-            for k in 0..2 {
-                lo[k] = lo[k].min(q[k]);
-                hi[k] = hi[k].max(q[k]);
-            }
-        }
+        let (lo, hi) = xy_bounds(
+            hull.iter()
+                .map(|p| [c * p[0] + s * p[1], -s * p[0] + c * p[1]]),
+        );
         let rect = (hi[0] - lo[0]) * (hi[1] - lo[1]);
         if rect < best.0 {
             best = (rect, theta);
@@ -302,12 +311,7 @@ fn footprint_yaw(points: &[Vector3<f64>], min_rectangularity: f64) -> Option<f64
     if !(best.0 > 0.0 && area / best.0 >= min_rectangularity) {
         return None;
     }
-    let q = std::f64::consts::FRAC_PI_2;
-    let mut y = best.1.rem_euclid(q);
-    if y > q / 2.0 {
-        y -= q;
-    }
-    Some(y)
+    Some(fold_quarter(best.1))
 }
 
 /// Estimate the frame of `points` (scan frame, metres) with up direction `up`; `cameras` (scan
@@ -343,13 +347,7 @@ pub fn estimate(
     let mut heights: Vec<f64> = lifted.iter().map(|p| p.z).collect();
     let lowest = quantile(&mut heights, FLOOR_QUANTILE);
     let top = heights[heights.len() - 1];
-    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-    for p in &lifted {
-        for k in 0..2 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
-        }
-    }
+    let (lo, hi) = xy_bounds(lifted.iter().map(|p| [p.x, p.y]));
     let horizontal = (hi[0] - lo[0]).hypot(hi[1] - lo[1]);
     if !(top - lowest > MIN_HEIGHT_SHARE * horizontal && top - lowest > 1e-6) {
         return Err(invalid(
@@ -367,18 +365,20 @@ pub fn estimate(
     let normals = normals(&reference);
     // The lowest sampled row of a surface lies on average half a point spacing above its
     // bottom edge: the floor is that much below the lowest points.
-    let mut spacing: Vec<f64> = normals
+    // (The reference points are a stride of the cloud: on a surface their spacing is √stride
+    // times the cloud's.)
+    let mut nn: Vec<f64> = normals
         .iter()
         .map(|n| n.2)
         .filter(|d| d.is_finite())
         .collect();
-    let spacing = if spacing.is_empty() {
+    let median_nn = if nn.is_empty() {
         0.0
     } else {
-        quantile(&mut spacing, 0.5) * (stride as f64).sqrt().recip()
+        quantile(&mut nn, 0.5)
     };
+    let spacing = median_nn / (stride as f64).sqrt();
     // The lowest point that is not isolated (a stray depth pixel floats alone).
-    let median_nn = spacing * (stride as f64).sqrt();
     let lowest = normals
         .iter()
         .zip(&reference)
@@ -438,16 +438,12 @@ pub fn estimate(
             .try_normalize(1e-12)
     });
     let side = side.flatten();
-    let frame_of = |yaw: f64, rot: &Rotation3<f64>| -> Result<ScanFrame, EngineError> {
-        let r = Rotation3::from_axis_angle(&Vector3::z_axis(), yaw) * rot;
-        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for p in points {
-            let q = r * Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-            for k in 0..2 {
-                lo[k] = lo[k].min(q[k]);
-                hi[k] = hi[k].max(q[k]);
-            }
-        }
+    let frame_of = |yaw: f64| -> Result<ScanFrame, EngineError> {
+        let r = Rotation3::from_axis_angle(&Vector3::z_axis(), yaw);
+        let (lo, hi) = xy_bounds(lifted.iter().map(|p| {
+            let q = r * p;
+            [q.x, q.y]
+        }));
         let t = [-(lo[0] + hi[0]) / 2.0, -(lo[1] + hi[1]) / 2.0, -floor];
         ScanFrame::new(up.into(), yaw, t).map_err(|e| invalid("frame", "finite", e.to_string()))
     };
@@ -469,7 +465,7 @@ pub fn estimate(
         // The front (−X) faces the camera: rotate the camera's side onto −X.
         let yaw = std::f64::consts::PI - side.y.atan2(side.x);
         return Ok(FrameEstimate {
-            frame: frame_of(yaw, &u)?,
+            frame: frame_of(yaw)?,
             floor,
             plane_share,
             hypotheses: Vec::new(),
@@ -484,13 +480,10 @@ pub fn estimate(
         .iter()
         .map(|&(p, phi)| (align * p, phi - yaw0))
         .collect();
-    let (mut alo, mut ahi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-    for p in lifted.iter().map(|p| align * p) {
-        for k in 0..2 {
-            alo[k] = alo[k].min(p[k]);
-            ahi[k] = ahi[k].max(p[k]);
-        }
-    }
+    let (alo, ahi) = xy_bounds(lifted.iter().map(|p| {
+        let q = align * p;
+        [q.x, q.y]
+    }));
     let band = FACE_BAND * (ahi[0] - alo[0]).hypot(ahi[1] - alo[1]);
     // Faces in order k: −X, +Y, +X, −Y (the face hypothesis k puts at the front: a yaw of
     // k·90° − yaw₀ rotates face k onto −X).
@@ -568,7 +561,7 @@ pub fn estimate(
         })
         .unwrap_or(0);
     Ok(FrameEstimate {
-        frame: frame_of(hypotheses[chosen].yaw, &u)?,
+        frame: frame_of(hypotheses[chosen].yaw)?,
         floor,
         plane_share,
         hypotheses,

@@ -9,6 +9,7 @@ pub mod frame;
 pub mod free_space;
 pub mod generate;
 pub mod guidance;
+pub mod predict;
 pub mod prune;
 pub mod sample;
 pub mod schedule;

@@ -20,9 +20,10 @@
 
 use std::ops::ControlFlow;
 
-use burn::tensor::{Device, Int, Tensor, TensorData};
+use burn::tensor::{Device, Tensor, TensorData};
 
 use super::guidance::{FreeSamples, GuidanceLosses, GuidanceOptions, SdfField, guidance_loss};
+use super::predict::{Predictor, tensor};
 use super::schedule::{Schedule, timesteps};
 use super::{EngineError, from_tensors};
 use crate::data::rng::Rng;
@@ -305,49 +306,15 @@ pub fn sample_guided(
         TensorData::new(gaussian(&mut rng, ne), [b, NUM_EDGES, EDGE_DIM]),
         device,
     );
-    let category = req
-        .category
-        .map(|c| Tensor::<1, Int>::from_data(TensorData::new(vec![c as i64; b], [b]), device));
-    // Classifier-free guidance: the conditional and the "no category" batch in one forward.
-    let cfg = req
-        .category
-        .filter(|_| req.category_guidance > 0.0 && model.config().categories > 0)
-        .map(|c| {
-            let mut idx = vec![c as i64; b];
-            idx.extend(vec![model.config().categories as i64; b]);
-            (
-                Tensor::<1, Int>::from_data(TensorData::new(idx, [2 * b]), device),
-                req.category_guidance as f32,
-            )
-        });
-    let guide_below = req.category_guidance_below.unwrap_or(usize::MAX);
-    let predict = |v: Tensor<3>, e: Tensor<3>, t: usize| -> (Tensor<3>, Tensor<3>) {
-        match cfg.as_ref().filter(|_| t < guide_below) {
-            None => {
-                let tt =
-                    Tensor::<1, Int>::from_data(TensorData::new(vec![t as i64; b], [b]), device);
-                model.forward(v, e, tt, category.clone())
-            }
-            Some((cats, w)) => {
-                let tt = Tensor::<1, Int>::from_data(
-                    TensorData::new(vec![t as i64; 2 * b], [2 * b]),
-                    device,
-                );
-                let (ev, ee) = model.forward(
-                    Tensor::cat(vec![v.clone(), v], 0),
-                    Tensor::cat(vec![e.clone(), e], 0),
-                    tt,
-                    Some(cats.clone()),
-                );
-                let mix = |x: Tensor<3>| {
-                    let c = x.clone().narrow(0, 0, b);
-                    let u = x.narrow(0, b, b);
-                    c.clone() + (c - u) * *w
-                };
-                (mix(ev), mix(ee))
-            }
-        }
-    };
+    // The denoiser on the host path; classifier-free guidance batches the conditional and the
+    // "no category" halves into one forward.
+    let mut predictor = Predictor::new(
+        model,
+        b,
+        req.category,
+        req.category_guidance,
+        req.category_guidance_below.unwrap_or(usize::MAX),
+    );
     let scale_tensors = guidance.map(|(_, ctx)| {
         (
             Tensor::<3>::from_data(
@@ -374,26 +341,33 @@ pub fn sample_guided(
         let guided = guidance.filter(|(g, _)| t < g.steps);
         let mut losses = None;
         let (eps_v, eps_e, grad) = if let Some((g, ctx)) = guided {
-            let va = v.clone().autodiff().require_grad();
-            let ea = e.clone().autodiff().require_grad();
-            let (ev, ee) = predict(va.clone(), ea.clone(), t);
+            let (ev, ee) = predictor.eps(&v, &e, t, true);
             let (sv, se) = scale_tensors.clone().expect("scales with guidance");
-            let x0v = (va.clone() - ev.clone() * n) / s * sv.autodiff();
-            let x0e = (ea.clone() - ee.clone() * n) / s * se.autodiff();
+            // ℓ's gradient at x̂₀ (raw units, a leaf), then the chain rule through
+            // x̂₀ = (x − n ε̂(x)) / s ⊙ scales on the host denoiser.
+            let x0v = ((v.clone() - ev.clone() * n) / s * sv.clone())
+                .autodiff()
+                .require_grad();
+            let x0e = ((e.clone() - ee.clone() * n) / s * se.clone())
+                .autodiff()
+                .require_grad();
             let mut mob_rng = Rng::fork(req.seed ^ MOB_STREAM, k as u64);
             let (grad, values) = guidance_gradient(
                 ctx.field,
                 g,
                 &free,
-                (&va, &ea),
-                (x0v, x0e),
+                (&x0v, &x0e),
+                (x0v.clone(), x0e.clone()),
                 &mut mob_rng,
-                (k + 1, t),
-            )?;
+            );
+            let grad = grad.map(|gx| {
+                through_denoiser(&mut predictor, gx, (&sv, &se), (s, n), (&v, &e))
+            });
+            let values = checked(&grad, g, values, (k + 1, t))?;
             losses = Some(values);
-            (ev.inner(), ee.inner(), grad)
+            (ev, ee, grad)
         } else {
-            let (ev, ee) = predict(v.clone(), e.clone(), t);
+            let (ev, ee) = predictor.eps(&v, &e, t, false);
             (ev, ee, None)
         };
         let x0_preview = (req.preview_every > 0
@@ -465,15 +439,9 @@ pub fn sample_guided(
             let x0v = va.clone() * sv.clone().autodiff();
             let x0e = ea.clone() * se.clone().autodiff();
             let mut mob_rng = Rng::fork(req.seed ^ MOB_STREAM, (step - 1) as u64);
-            let (grad, values) = guidance_gradient(
-                ctx.field,
-                g,
-                &free,
-                (&va, &ea),
-                (x0v, x0e),
-                &mut mob_rng,
-                (step, 0),
-            )?;
+            let (grad, values) =
+                guidance_gradient(ctx.field, g, &free, (&va, &ea), (x0v, x0e), &mut mob_rng);
+            let values = checked(&grad, g, values, (step, 0))?;
             if physics_step && best.as_ref().is_none_or(|b| values.total < b.0) {
                 best = Some((values.total, v.clone(), e.clone()));
             }
@@ -538,8 +506,7 @@ pub fn step_events(schedule_len: usize, steps: usize, guidance: Option<&Guidance
 type Gradient = (Option<Tensor<3>>, Option<Tensor<3>>);
 
 /// ℓ(x̂₀) and its gradient with respect to `wrt`, where `x0` = (nodes, edges) of x̂₀ in raw units
-/// was computed from `wrt` on the autodiff device. Fails as diverged on a non-finite loss, or on
-/// a non-finite gradient (or, without a clamp, one beyond [`DIVERGENCE_LIMIT`]).
+/// was computed from `wrt` on the autodiff device.
 fn guidance_gradient(
     field: &dyn SdfField,
     g: &GuidanceOptions,
@@ -547,9 +514,52 @@ fn guidance_gradient(
     wrt: (&Tensor<3>, &Tensor<3>),
     x0: (Tensor<3>, Tensor<3>),
     mob_rng: &mut Rng,
+) -> (Option<Gradient>, GuidanceLosses) {
+    let (loss, values) = guidance_loss(field, g, free, x0.0, x0.1, mob_rng);
+    let grad = loss.filter(|_| values.total.is_finite()).map(|loss| {
+        let grads = loss.backward();
+        let gv = wrt.0.grad(&grads).map(|g| g.inner());
+        let ge = wrt.1.grad(&grads).map(|g| g.inner());
+        (gv, ge)
+    });
+    (grad, values)
+}
+
+/// The gradient of ℓ with respect to the state x_t from its gradient `gx` at x̂₀ = (x − n ε̂(x))
+/// / s ⊙ scales: the direct term gx ⊙ scales / s, and −n times it pushed back through the
+/// denoiser's last recorded forward.
+fn through_denoiser(
+    predictor: &mut Predictor,
+    (gv, ge): Gradient,
+    (sv, se): (&Tensor<3>, &Tensor<3>),
+    (s, n): (f32, f32),
+    (v, e): (&Tensor<3>, &Tensor<3>),
+) -> Gradient {
+    let direct = |g: Option<Tensor<3>>, scale: &Tensor<3>, like: &Tensor<3>| match g {
+        Some(g) => g * scale.clone() / s,
+        None => like.zeros_like(),
+    };
+    let (dv, de) = (direct(gv, sv, v), direct(ge, se, e));
+    let flat = |x: &Tensor<3>| -> Vec<f32> {
+        let up = x.clone() * -n;
+        up.into_data().try_to_vec::<f32>().expect("f32 gradient")
+    };
+    let (jv, je) = predictor.backward(&flat(&dv), &flat(&de));
+    let device = v.device();
+    (
+        Some(dv + tensor(jv, v.dims(), &device)),
+        Some(de + tensor(je, e.dims(), &device)),
+    )
+}
+
+/// `values` with the gradient's largest entry, or diverged on a non-finite loss, or on a
+/// non-finite gradient (or, without a clamp, one beyond [`DIVERGENCE_LIMIT`]).
+fn checked(
+    grad: &Option<Gradient>,
+    g: &GuidanceOptions,
+    mut values: GuidanceLosses,
     (step, t): (usize, usize),
-) -> Result<(Option<Gradient>, GuidanceLosses), EngineError> {
-    let (loss, mut values) = guidance_loss(field, g, free, x0.0, x0.1, mob_rng);
+) -> Result<GuidanceLosses, EngineError> {
     if !values.total.is_finite() {
         return Err(EngineError::Diverged {
             step,
@@ -557,14 +567,8 @@ fn guidance_gradient(
             what: "guidance loss",
         });
     }
-    let grad = loss.map(|loss| {
-        let grads = loss.backward();
-        let gv = wrt.0.grad(&grads).map(|g| g.inner());
-        let ge = wrt.1.grad(&grads).map(|g| g.inner());
-        (gv, ge)
-    });
     let mut gmax = 0.0f32;
-    if let Some((gv, ge)) = &grad {
+    if let Some((gv, ge)) = grad {
         for x in [gv, ge].into_iter().flatten() {
             let m: f32 = x.clone().abs().max().into_scalar::<f32>();
             gmax = if m.is_nan() { f32::NAN } else { gmax.max(m) };
@@ -592,7 +596,7 @@ fn guidance_gradient(
         });
     }
     values.grad_max = gmax as f64;
-    Ok((grad, values))
+    Ok(values)
 }
 
 /// x ← x − clamp(∇ℓ, ±max_step) (no clamp when `max_step` is None).

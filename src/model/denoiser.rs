@@ -765,5 +765,7 @@ impl Denoiser {
     }
 }
 
+pub mod host;
+
 #[cfg(test)]
 mod tests;

@@ -44,8 +44,9 @@
 //! The shape prior's trainer (`train::shape`) hands these to burn through a surrogate
 //! Σ W ⊙ sg(∂W) whose gradient is exactly them, so burn's tape holds the encoder only.
 
-use burn::nn::Linear;
 use rayon::prelude::*;
+
+use super::kernels::{HostLinear, add_into, matmul_at_acc, matmul_bt_acc};
 
 use super::shape_prior::ShapeDecoder;
 
@@ -55,111 +56,6 @@ pub const BLOCK_ROWS: usize = 128;
 /// Blocks per gradient group of [`HostDecoder::weight_grads`]: each group sums its blocks'
 /// weight gradients into its own buffers (one allocation of all gradients per group).
 pub const GROUP_BLOCKS: usize = 8;
-
-/// A linear layer: `w` [d_in, d_out] row-major (burn's layout), `b` [d_out] or none.
-#[derive(Debug, Clone)]
-struct HostLinear {
-    w: Vec<f32>,
-    b: Option<Vec<f32>>,
-    d_in: usize,
-    d_out: usize,
-}
-
-impl HostLinear {
-    fn new(l: &Linear) -> Self {
-        let [d_in, d_out] = l.weight.shape().dims::<2>();
-        let w = l
-            .weight
-            .val()
-            .into_data()
-            .try_to_vec::<f32>()
-            .expect("decoder weights are f32");
-        let b = l.bias.as_ref().map(|b| {
-            b.val()
-                .into_data()
-                .try_to_vec::<f32>()
-                .expect("decoder biases are f32")
-        });
-        HostLinear { w, b, d_in, d_out }
-    }
-
-    /// `dst` [rows, d_out] = (accumulate ? dst : 0) + bias + `x` [rows, d_in] · W.
-    fn apply(&self, x: &[f32], dst: &mut [f32], rows: usize, accumulate: bool) {
-        if !accumulate {
-            dst[..rows * self.d_out].fill(0.0);
-        }
-        if let Some(b) = &self.b {
-            for r in dst[..rows * self.d_out].chunks_exact_mut(self.d_out) {
-                r.iter_mut().zip(b).for_each(|(v, b)| *v += b);
-            }
-        }
-        matmul_acc(dst, x, &self.w, rows, self.d_in, self.d_out);
-    }
-}
-
-/// `dst` [m, n] += `a` [m, k] · `b` [k, n], all row-major and contiguous.
-fn matmul_acc(dst: &mut [f32], a: &[f32], b: &[f32], m: usize, k: usize, n: usize) {
-    gemm_acc(dst, a, b, m, k, n, false, false);
-}
-
-/// `dst` [m, n] += `a` [m, k] · `b`ᵀ for `b` [n, k], all row-major and contiguous.
-fn matmul_bt_acc(dst: &mut [f32], a: &[f32], b: &[f32], m: usize, k: usize, n: usize) {
-    gemm_acc(dst, a, b, m, k, n, false, true);
-}
-
-/// `dst` [m, n] += `a`ᵀ · `b` for `a` [k, m] and `b` [k, n], all row-major and contiguous (a
-/// weight gradient: layer inputs [rows, d_in]ᵀ · output gradients [rows, d_out]).
-fn matmul_at_acc(dst: &mut [f32], a: &[f32], b: &[f32], m: usize, k: usize, n: usize) {
-    gemm_acc(dst, a, b, m, k, n, true, false);
-}
-
-/// `dst` [m, n] += A · B, A = `a` [m, k] or, transposed, `a`ᵀ with `a` [k, m]; B = `b` [k, n]
-/// or, transposed, `b`ᵀ with `b` [n, k].
-#[allow(clippy::too_many_arguments)]
-fn gemm_acc(
-    dst: &mut [f32],
-    a: &[f32],
-    b: &[f32],
-    m: usize,
-    k: usize,
-    n: usize,
-    at: bool,
-    bt: bool,
-) {
-    assert!(dst.len() >= m * n && a.len() >= m * k && b.len() >= k * n);
-    // (column stride, row stride) of A inside `a` and of B inside `b`.
-    let (a_cs, a_rs) = if at { (m as isize, 1) } else { (1, k as isize) };
-    let (b_cs, b_rs) = if bt { (k as isize, 1) } else { (1, n as isize) };
-    if m == 0 || n == 0 || k == 0 {
-        return;
-    }
-    // SAFETY: the three buffers hold at least m·n, m·k and k·n elements (asserted above), the
-    // strides describe contiguous row-major matrices (A or B possibly read transposed) inside them,
-    // and `dst` is a unique borrow that does not alias `a` or `b`.
-    unsafe {
-        gemm::gemm(
-            m,
-            n,
-            k,
-            dst.as_mut_ptr(),
-            1,
-            n as isize,
-            true,
-            a.as_ptr(),
-            a_cs,
-            a_rs,
-            b.as_ptr(),
-            b_cs,
-            b_rs,
-            1.0f32,
-            1.0f32,
-            false,
-            false,
-            false,
-            gemm::Parallelism::None,
-        );
-    }
-}
 
 /// ReLU's backward pass: zero `g` where the matching entry of `x` (the ReLU's input, or its
 /// output) is ≤ 0. Written as a select, not a conditional store, so that it vectorises on the
@@ -260,10 +156,6 @@ impl LinearGrad {
             add_into(a, b);
         }
     }
-}
-
-fn add_into(dst: &mut [f32], src: &[f32]) {
-    dst.iter_mut().zip(src).for_each(|(d, s)| *d += s);
 }
 
 /// `dst` [n] += Σ_r `g`[r, ·] over the rows of `g` [rows, n] (a bias gradient).

@@ -9,6 +9,7 @@
 pub mod codebook;
 pub mod denoiser;
 pub mod host_decoder;
+pub(crate) mod kernels;
 pub mod shape_prior;
 
 use burn::tensor::Device;

@@ -3,7 +3,7 @@
 //! guidance run).
 //!
 //! Run: `cargo run --release --example bench_denoiser -- [--threads 2] [--weights weights]
-//! [--sweep] [--train-batch 64]`. With `--weights DIR` the first table row is the shipped
+//! [--sweep] [--train-batch 64] [--versus]`. With `--weights DIR` the first table row is the shipped
 //! denoiser (its manifest's config and values) instead of a random default-config model.
 //! Every measurement runs inside a rayon pool of `--threads` threads (default 2, the service's
 //! budget). Reported: median over the repetitions, after warm-up.
@@ -211,14 +211,48 @@ fn block_samples() -> usize {
         .unwrap_or(physnap::model::denoiser::host::BLOCK_SAMPLES)
 }
 
-/// `--host-only B REPS`: only the host forward at batch B, REPS times (for a profiler).
-fn host_only(model: &Denoiser, b: usize, reps: usize) {
+/// `--versus`: what `scripts/torch_reference/bench.py` times on both sides, on the host path,
+/// as one JSON line of medians in ms: forward B = 1 and B = 16, forward + input gradient B = 1,
+/// and a 200-step DDIM sample B = 1 with the category and no classifier-free guidance.
+fn versus(model: &Denoiser) {
     let host = HostDenoiser::new(model).with_block_samples(block_samples());
-    let (v, e, t, c) = flat_inputs(b);
+    let cats = model.config().categories > 0;
+    let fwd = |b: usize, reps: usize| {
+        let (v, e, t, c) = flat_inputs(b);
+        let mut ws = Workspace::default();
+        let (mut ev, mut ee) = (vec![0.0; v.len()], vec![0.0; e.len()]);
+        let c = cats.then_some(c.as_slice());
+        median_ms(reps, || host.forward(&v, &e, &t, c, &mut ev, &mut ee, &mut ws, false))
+    };
+    let (f1, f16) = (fwd(1, 101), fwd(16, 21));
+    let (v, e, t, c) = flat_inputs(1);
+    let (rv, re, _, _) = flat_inputs(1);
+    let c = cats.then_some(c.as_slice());
     let mut ws = Workspace::default();
     let (mut ev, mut ee) = (vec![0.0; v.len()], vec![0.0; e.len()]);
-    let ms = median_ms(reps, || host.forward(&v, &e, &t, Some(&c), &mut ev, &mut ee, &mut ws, false));
-    println!("host forward B={b}: {ms:.2} ms");
+    let (mut gv, mut ge) = (vec![0.0; v.len()], vec![0.0; e.len()]);
+    let fg1 = median_ms(51, || {
+        host.forward(&v, &e, &t, c, &mut ev, &mut ee, &mut ws, true);
+        host.backward(&mut ws, &rv, &re, &mut gv, &mut ge);
+    });
+    let req = SampleRequest {
+        seed: 1,
+        batch: 1,
+        category: cats.then_some(6),
+        sampler: Sampler::Ddim { eta: 0.0 },
+        steps: 200,
+        category_guidance: 0.0,
+        ..SampleRequest::default()
+    };
+    let s200 = median_ms(7, || {
+        sample(model, &Schedule::default(), &req, &cpu(), &mut |_| {
+            std::ops::ControlFlow::Continue(())
+        })
+        .expect("sample");
+    });
+    println!(
+        "{{\"forward_b1\": {f1:.4}, \"forward_b16\": {f16:.4}, \"forward_grad_b1\": {fg1:.4}, \"sample_ddim200_b1\": {s200:.3}}}"
+    );
 }
 
 fn random(cfg: &DenoiserConfig) -> Denoiser {
@@ -249,15 +283,12 @@ fn main() {
         .num_threads(threads)
         .build()
         .expect("rayon pool");
-    let host_only_args = args
-        .iter()
-        .position(|a| a == "--host-only")
-        .map(|i| (args[i + 1].parse().expect("B"), args[i + 2].parse().expect("REPS")));
+    let versus_mode = args.iter().any(|a| a == "--versus");
     pool.install(|| {
-        if let Some((b, reps)) = host_only_args {
+        if versus_mode {
             let dir = weights.clone().unwrap_or_else(|| "weights".into());
             let loaded = physnap::io::manifest::load_models(&dir, &cpu()).expect("weights");
-            return host_only(&loaded.denoiser, b, reps);
+            return versus(&loaded.denoiser);
         }
         println!("threads: {}", rayon::current_num_threads());
         println!(

@@ -3,7 +3,8 @@
 //! overlapping pairs and edges over the threshold follows from random x̂₀, so the pen/mob cost is
 //! that of a busy graph, not of a trained sample).
 //!
-//! Run: `cargo run --example bench_guidance [-- STEPS]` (figures go to BENCHMARKS.md).
+//! Run: `cargo run --example bench_guidance [-- STEPS [BATCH]]` (figures go to BENCHMARKS.md);
+//! BATCH (default 1) samples in one run: the cost of a guided step at N = BATCH.
 //! Threads: the rayon global pool (RAYON_NUM_THREADS, default = cores).
 
 use std::ops::ControlFlow;
@@ -38,6 +39,11 @@ fn main() {
         .nth(1)
         .and_then(|s| s.parse().ok())
         .unwrap_or(10);
+    let batch: usize = std::env::args()
+        .nth(2)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1);
+    println!("batch: {batch}");
     println!("threads: {}", rayon::current_num_threads());
     let dev = physnap::model::cpu();
     let tiny = (
@@ -90,7 +96,7 @@ fn main() {
             });
             let req = SampleRequest {
                 seed: 3,
-                batch: 1,
+                batch,
                 category: None,
                 guidance,
                 steps,

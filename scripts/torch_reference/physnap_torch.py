@@ -7,7 +7,12 @@ evaluates the same function by row blocks), the edge features of every directed 
 built densely, attention is one einsum. Used by `fixtures.py` (golden values for the Rust
 parity test) and `bench.py` (speed beside physnap).
 
-    Denoiser(tensors, config)(v, e, t, category) -> (eps_v, eps_e)
+    Denoiser(tensors, config, fast=False)(v, e, t, category) -> (eps_v, eps_e)
+
+`fast=True` evaluates the Linears over concatenations by row blocks of the same weights, as
+physnap does (the per-node terms A v_i, B v_j and the time and slot encodings once per node or
+sample instead of once per edge): the same function with about half the edge FLOPs, which is
+what `bench.py` times so that both sides do the same work.
     Decoder(tensors, pe_freqs)(q, features) -> sdf
 """
 
@@ -51,7 +56,8 @@ def load_config(manifest_or_config, key="denoiser"):
 
 
 class Denoiser:
-    def __init__(self, tensors, config):
+    def __init__(self, tensors, config, fast=False):
+        self.fast = fast
         self.p = tensors
         self.c = config
         self.w = config["width"]
@@ -87,7 +93,12 @@ class Denoiser:
             acts.append(h)
         return self.lin(f"{name}.out", torch.cat(acts, -1))
 
+    def rows(self, name, start, stop):
+        return self.p[name + ".weight"][start:stop]
+
     def layer(self, l, h, g, tau):
+        if self.fast:
+            return self.layer_fast(l, h, g, tau)
         b, w, H = h.shape[0], self.w, self.heads
         hc = w // H
         name = f"layers.{l}"
@@ -106,6 +117,27 @@ class Denoiser:
         pooled = v1.max(1, keepdim=True).values.expand(b, K, w)
         v2 = F.silu(self.lin(name + ".node_out", torch.cat([v1, pooled], -1)))
         return v2, u
+
+    def layer_fast(self, l, h, g, tau):
+        b, w, H = h.shape[0], self.w, self.heads
+        hc, p = w // H, self.slot_pe.shape[1]
+        name = f"layers.{l}"
+        nb, eb_, m1, no = (name + x for x in (".node_bind", ".edge_bind", ".edge_mlp1", ".node_out"))
+        time_n = tau @ self.rows(nb, w + p, None) + self.p[nb + ".bias"]
+        vb = F.silu(h @ self.rows(nb, 0, w) + (self.slot_pe @ self.rows(nb, w, w + p))[None] + time_n[:, None])
+        time_e = tau @ self.rows(eb_, w, None) + self.p[eb_ + ".bias"]
+        eb = F.silu(g @ self.rows(eb_, 0, w) + time_e[:, None])
+        a = vb @ self.rows(m1, 0, w)
+        bj = vb @ self.rows(m1, w, 2 * w)
+        c = (eb @ self.rows(m1, 2 * w, None) + self.p[m1 + ".bias"]).reshape(b, K, K, w)
+        u = self.lin(name + ".edge_mlp2", F.silu(c + a[:, :, None] + bj[:, None])).reshape(b, K * K, w)
+        q = self.lin(name + ".query", vb).reshape(b, K, H, hc).transpose(1, 2)
+        k = self.lin(name + ".key", vb).reshape(b, K, H, hc).transpose(1, 2)
+        alpha = torch.softmax(q @ k.transpose(-1, -2) * self.scale, -1)
+        msg = torch.einsum("bhij,bijhc->bihc", alpha, u.reshape(b, K, K, H, hc)).reshape(b, K, w)
+        v1 = msg + F.silu(self.lin(name + ".self_term", vb))
+        pooled = v1.max(1, keepdim=True).values @ self.rows(no, w, None) + self.p[no + ".bias"]
+        return F.silu(v1 @ self.rows(no, 0, w) + pooled), u
 
     def __call__(self, v, e, t, category=None):
         """v [B,8,135], e [B,28,13], t [B] long, category [B] long (categories = none) or None."""

@@ -22,9 +22,9 @@ use std::time::Instant;
 
 use burn::tensor::{Device, Int, Tensor, TensorData};
 use physnap::data::rng::Rng;
-use physnap::graph::{EDGE_DIM, K, NODE_DIM, NUM_EDGES};
 use physnap::engine::sample::{SampleRequest, Sampler, sample};
 use physnap::engine::schedule::Schedule;
+use physnap::graph::{EDGE_DIM, K, NODE_DIM, NUM_EDGES};
 use physnap::model::denoiser::host::{HostDenoiser, Workspace};
 use physnap::model::denoiser::{Denoiser, DenoiserConfig};
 use physnap::model::{cpu, cpu_autodiff};
@@ -69,7 +69,11 @@ fn paired_ms(reps: usize, mut a: impl FnMut(), mut b: impl FnMut()) -> (f64, f64
 fn flat_inputs(b: usize) -> (Vec<f32>, Vec<f32>, Vec<usize>, Vec<usize>) {
     let (v, e, t, c) = inputs(b, &cpu());
     let ints = |x: Tensor<1, Int>| -> Vec<usize> {
-        x.try_into_vec_as::<i64>().expect("ints").into_iter().map(|x| x as usize).collect()
+        x.try_into_vec_as::<i64>()
+            .expect("ints")
+            .into_iter()
+            .map(|x| x as usize)
+            .collect()
     };
     let f = |x: Tensor<3>| x.into_data().try_to_vec::<f32>().expect("f32");
     (f(v), f(e), ints(t), ints(c))
@@ -222,7 +226,9 @@ fn versus(model: &Denoiser) {
         let mut ws = Workspace::default();
         let (mut ev, mut ee) = (vec![0.0; v.len()], vec![0.0; e.len()]);
         let c = cats.then_some(c.as_slice());
-        median_ms(reps, || host.forward(&v, &e, &t, c, &mut ev, &mut ee, &mut ws, false))
+        median_ms(reps, || {
+            host.forward(&v, &e, &t, c, &mut ev, &mut ee, &mut ws, false)
+        })
     };
     let (f1, f16) = (fwd(1, 101), fwd(16, 21));
     let (v, e, t, c) = flat_inputs(1);

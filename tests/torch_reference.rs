@@ -31,7 +31,10 @@ fn read(name: &str) -> Vec<f32> {
 
 fn rel(got: &[f32], want: &[f32]) -> f64 {
     assert_eq!(got.len(), want.len(), "lengths");
-    let scale = want.iter().fold(0.0f64, |m, x| m.max(x.abs() as f64)).max(1e-12);
+    let scale = want
+        .iter()
+        .fold(0.0f64, |m, x| m.max(x.abs() as f64))
+        .max(1e-12);
     got.iter()
         .zip(want)
         .map(|(a, b)| (*a as f64 - *b as f64).abs())
@@ -41,7 +44,10 @@ fn rel(got: &[f32], want: &[f32]) -> f64 {
 
 fn assert_close(what: &str, got: &[f32], want: &[f32]) {
     let r = rel(got, want);
-    assert!(r <= TOLERANCE, "{what}: {r:e} relative to PyTorch (limit {TOLERANCE:e})");
+    assert!(
+        r <= TOLERANCE,
+        "{what}: {r:e} relative to PyTorch (limit {TOLERANCE:e})"
+    );
 }
 
 fn tiny_model() -> Denoiser {
@@ -49,7 +55,11 @@ fn tiny_model() -> Denoiser {
     let c: serde_json::Value = serde_json::from_str(&text).expect("json");
     let n = |k: &str| c[k].as_u64().expect("number") as usize;
     let list = |k: &str| -> Vec<usize> {
-        c[k].as_array().expect("list").iter().map(|x| x.as_u64().expect("n") as usize).collect()
+        c[k].as_array()
+            .expect("list")
+            .iter()
+            .map(|x| x.as_u64().expect("n") as usize)
+            .collect()
     };
     let cfg = DenoiserConfig {
         width: n("width"),
@@ -109,7 +119,10 @@ fn check_denoiser(prefix: &str, model: &Denoiser) {
         };
         let (bv, be) = model.forward(
             Tensor::from_data(TensorData::new(v.clone(), [b, K, NODE_DIM]), &device),
-            Tensor::from_data(TensorData::new(e.clone(), [b, NUM_EDGES, EDGE_DIM]), &device),
+            Tensor::from_data(
+                TensorData::new(e.clone(), [b, NUM_EDGES, EDGE_DIM]),
+                &device,
+            ),
             ints(&t),
             cats.as_deref().map(ints),
         );
@@ -133,11 +146,18 @@ fn shipped_denoiser_matches_pytorch() {
 fn shipped_decoder_matches_pytorch() {
     let models = shipped();
     let host = HostDecoder::new(&models.shape_prior.decoder);
-    let points: Vec<[f32; 3]> = read("decoder_points").chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
+    let points: Vec<[f32; 3]> = read("decoder_points")
+        .chunks_exact(3)
+        .map(|p| [p[0], p[1], p[2]])
+        .collect();
     let idx: Vec<usize> = read("decoder_index").iter().map(|&x| x as usize).collect();
     let g = host.eval_with_grads(&points, &read("decoder_features"), &idx);
     assert_close("decoder f", &g.values, &read("decoder_sdf"));
     let d_points: Vec<f32> = g.d_points.iter().flatten().copied().collect();
     assert_close("decoder ∂f/∂q", &d_points, &read("decoder_grad_points"));
-    assert_close("decoder ∂f/∂features", &g.d_features, &read("decoder_grad_features"));
+    assert_close(
+        "decoder ∂f/∂features",
+        &g.d_features,
+        &read("decoder_grad_features"),
+    );
 }

@@ -360,9 +360,8 @@ pub fn sample_guided(
                 (x0v.clone(), x0e.clone()),
                 &mut mob_rng,
             );
-            let grad = grad.map(|gx| {
-                through_denoiser(&mut predictor, gx, (&sv, &se), (s, n), (&v, &e))
-            });
+            let grad =
+                grad.map(|gx| through_denoiser(&mut predictor, gx, (&sv, &se), (s, n), (&v, &e)));
             let values = checked(&grad, g, values, (k + 1, t))?;
             losses = Some(values);
             (ev, ee, grad)

@@ -95,10 +95,9 @@ pub struct DenoiserConfig {
 
 impl Default for DenoiserConfig {
     /// The small CPU model: width 160, 4 layers, 5 heads of 32 channels, node heads
-    /// [128, 128, 128], edge heads [128, 64, 32], 46 categories; 2 161 508 parameters. Measured
-    /// (release, 2 rayon threads, `bench_denoiser` example): forward B = 1 ≈ 2.3 ms (a 1000-step
-    /// sample ≈ 2.3 s), input-gradient forward+backward B = 1 ≈ 7 ms, training ≈ 200 denoising
-    /// samples/s at B = 64. Width 192 costs ≈ 3.3 ms, 256 ≈ 6–7 ms (over the 5 ms budget).
+    /// [128, 128, 128], edge heads [128, 64, 32], 46 categories; 2 161 508 parameters. Its
+    /// speed (this module for training, the host path for sampling) is in BENCHMARKS.md,
+    /// "Sampling (the denoiser)".
     fn default() -> Self {
         DenoiserConfig {
             width: 160,

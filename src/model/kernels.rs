@@ -163,13 +163,31 @@ pub(crate) fn matmul_acc(dst: &mut [f32], a: &[f32], b: &[f32], m: usize, k: usi
 
 /// `dst` [m, n] += `a` [m, k] · `b`ᵀ for `b` [n, k], all row-major and contiguous.
 pub(crate) fn matmul_bt_acc(dst: &mut [f32], a: &[f32], b: &[f32], m: usize, k: usize, n: usize) {
-    mm(dst, n, View::rows(a, k), View::transposed(b, k), m, k, n, true);
+    mm(
+        dst,
+        n,
+        View::rows(a, k),
+        View::transposed(b, k),
+        m,
+        k,
+        n,
+        true,
+    );
 }
 
 /// `dst` [m, n] += `a`ᵀ · `b` for `a` [k, m] and `b` [k, n], all row-major and contiguous (a
 /// weight gradient: layer inputs [rows, d_in]ᵀ · output gradients [rows, d_out]).
 pub(crate) fn matmul_at_acc(dst: &mut [f32], a: &[f32], b: &[f32], m: usize, k: usize, n: usize) {
-    mm(dst, n, View::transposed(a, m), View::rows(b, n), m, k, n, true);
+    mm(
+        dst,
+        n,
+        View::transposed(a, m),
+        View::rows(b, n),
+        m,
+        k,
+        n,
+        true,
+    );
 }
 
 /// Add `row` to every row of `dst` (a bias).
@@ -198,7 +216,7 @@ fn exp_approx(x: f32) -> f32 {
     p = p * r + 8.333_452e-3;
     p = p * r + 4.166_579_6e-2;
     p = p * r + 1.666_666_5e-1;
-    p = p * r + 5.000_000_1e-1;
+    p = p * r + 0.5;
     let y = p * r * r + r + 1.0;
     y * f32::from_bits(((n as i32 + 127) as u32) << 23)
 }
@@ -275,18 +293,28 @@ mod tests {
 
     #[test]
     fn silu_and_its_derivative_match_the_formula() {
-        let xs: Vec<f32> = (-400..400).map(|i| i as f32 * 0.05).chain([-120.0, 120.0]).collect();
+        let xs: Vec<f32> = (-400..400)
+            .map(|i| i as f32 * 0.05)
+            .chain([-120.0, 120.0])
+            .collect();
         let mut y = xs.clone();
         let mut d = vec![0.0; xs.len()];
         silu_with_deriv(&mut y, &mut d);
         let mut y2 = xs.clone();
         silu(&mut y2);
-        let differ = y.iter().zip(&y2).filter(|(a, b)| a.to_bits() != b.to_bits()).count();
+        let differ = y
+            .iter()
+            .zip(&y2)
+            .filter(|(a, b)| a.to_bits() != b.to_bits())
+            .count();
         assert_eq!(differ, 0, "the two SiLU kernels agree bit for bit");
         for ((&x, &y), &d) in xs.iter().zip(&y).zip(&d) {
             let s = 1.0 / (1.0 + (-(x as f64)).exp());
             let (wy, wd) = (x as f64 * s, s * (1.0 + x as f64 * (1.0 - s)));
-            assert!((y as f64 - wy).abs() <= 1e-6 * (1.0 + wy.abs()), "silu({x}) = {y}, want {wy}");
+            assert!(
+                (y as f64 - wy).abs() <= 1e-6 * (1.0 + wy.abs()),
+                "silu({x}) = {y}, want {wy}"
+            );
             assert!((d as f64 - wd).abs() <= 1e-6, "silu'({x}) = {d}, want {wd}");
         }
         // Far tails: SiLU(−120) is 0 to f32 precision, SiLU(120) is 120.
@@ -299,9 +327,30 @@ mod tests {
         let a = [0.0, 1.0, 2.0, 3.0, 0.0, 0.0, 4.0, 5.0, 6.0, 0.0];
         let c = [1.0, 0.0, 2.0, 0.0, 1.0, 0.0];
         let mut dst = [10.0f32; 4];
-        mm(&mut dst, 2, View::cols(&a, 5, 1), View::transposed(&c, 3), 2, 3, 2, true);
-        assert_eq!(dst, [10.0 + 1.0 + 6.0, 10.0 + 2.0, 10.0 + 4.0 + 12.0, 10.0 + 5.0]);
-        mm(&mut dst, 2, View::cols(&a, 5, 1), View::transposed(&c, 3), 2, 3, 2, false);
+        mm(
+            &mut dst,
+            2,
+            View::cols(&a, 5, 1),
+            View::transposed(&c, 3),
+            2,
+            3,
+            2,
+            true,
+        );
+        assert_eq!(
+            dst,
+            [10.0 + 1.0 + 6.0, 10.0 + 2.0, 10.0 + 4.0 + 12.0, 10.0 + 5.0]
+        );
+        mm(
+            &mut dst,
+            2,
+            View::cols(&a, 5, 1),
+            View::transposed(&c, 3),
+            2,
+            3,
+            2,
+            false,
+        );
         assert_eq!(dst, [7.0, 2.0, 16.0, 5.0]);
     }
 }

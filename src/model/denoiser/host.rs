@@ -174,7 +174,8 @@ fn sized(buf: &mut Vec<f32>, len: usize) {
 
 fn leaky(x: &mut [f32]) {
     let s = HEAD_SLOPE as f32;
-    x.iter_mut().for_each(|x| *x = if *x > 0.0 { *x } else { *x * s });
+    x.iter_mut()
+        .for_each(|x| *x = if *x > 0.0 { *x } else { *x * s });
 }
 
 /// `g` ← `g` ⊙ LeakyReLU′ at the activation `act` (same sign as its input).
@@ -259,11 +260,38 @@ impl Head {
             sized(act, m * l.d_out);
             add_rows(act, l.b.as_deref().expect("head layers have biases"));
             if k == 0 {
-                mm(act, l.d_out, View::rows(feat, w), View::rows(l.rows(0, w), l.d_out), m, w, l.d_out, true);
-                mm(act, l.d_out, x, View::rows(l.rows(w, ns), l.d_out), m, ns, l.d_out, true);
+                mm(
+                    act,
+                    l.d_out,
+                    View::rows(feat, w),
+                    View::rows(l.rows(0, w), l.d_out),
+                    m,
+                    w,
+                    l.d_out,
+                    true,
+                );
+                mm(
+                    act,
+                    l.d_out,
+                    x,
+                    View::rows(l.rows(w, ns), l.d_out),
+                    m,
+                    ns,
+                    l.d_out,
+                    true,
+                );
             } else {
                 let prev = &done[k - 1];
-                mm(act, l.d_out, View::rows(prev, l.d_in), View::rows(&l.w, l.d_out), m, l.d_in, l.d_out, true);
+                mm(
+                    act,
+                    l.d_out,
+                    View::rows(prev, l.d_in),
+                    View::rows(&l.w, l.d_out),
+                    m,
+                    l.d_in,
+                    l.d_out,
+                    true,
+                );
             }
             leaky(act);
         }
@@ -272,11 +300,38 @@ impl Head {
         for r in 0..m {
             out[r * out_rs..r * out_rs + ns].copy_from_slice(b);
         }
-        mm(out, out_rs, View::rows(feat, w), View::rows(o.rows(0, w), ns), m, w, ns, true);
-        mm(out, out_rs, x, View::rows(o.rows(w, ns), ns), m, ns, ns, true);
+        mm(
+            out,
+            out_rs,
+            View::rows(feat, w),
+            View::rows(o.rows(0, w), ns),
+            m,
+            w,
+            ns,
+            true,
+        );
+        mm(
+            out,
+            out_rs,
+            x,
+            View::rows(o.rows(w, ns), ns),
+            m,
+            ns,
+            ns,
+            true,
+        );
         let mut off = w + ns;
         for (act, l) in acts.iter().zip(&self.hidden) {
-            mm(out, out_rs, View::rows(act, l.d_out), View::rows(o.rows(off, l.d_out), ns), m, l.d_out, ns, true);
+            mm(
+                out,
+                out_rs,
+                View::rows(act, l.d_out),
+                View::rows(o.rows(off, l.d_out), ns),
+                m,
+                l.d_out,
+                ns,
+                true,
+            );
             off += l.d_out;
         }
     }
@@ -310,19 +365,73 @@ impl Head {
             let (lo, hi) = dacts.split_at_mut(k + 1);
             let da = &mut lo[k];
             sized(da, m * l.d_out);
-            mm(da, l.d_out, d_out, View::transposed(o.rows(off[k], l.d_out), ns), m, ns, l.d_out, false);
+            mm(
+                da,
+                l.d_out,
+                d_out,
+                View::transposed(o.rows(off[k], l.d_out), ns),
+                m,
+                ns,
+                l.d_out,
+                false,
+            );
             if k + 1 < hid {
                 let next = &self.hidden[k + 1];
-                mm(da, l.d_out, View::rows(&hi[0], next.d_out), View::transposed(&next.w, next.d_out), m, next.d_out, l.d_out, true);
+                mm(
+                    da,
+                    l.d_out,
+                    View::rows(&hi[0], next.d_out),
+                    View::transposed(&next.w, next.d_out),
+                    m,
+                    next.d_out,
+                    l.d_out,
+                    true,
+                );
             }
             leaky_backward(da, &acts[k]);
         }
-        mm(d_feat, w, d_out, View::transposed(o.rows(0, w), ns), m, ns, w, true);
-        mm(d_x, dx_rs, d_out, View::transposed(o.rows(w, ns), ns), m, ns, ns, true);
+        mm(
+            d_feat,
+            w,
+            d_out,
+            View::transposed(o.rows(0, w), ns),
+            m,
+            ns,
+            w,
+            true,
+        );
+        mm(
+            d_x,
+            dx_rs,
+            d_out,
+            View::transposed(o.rows(w, ns), ns),
+            m,
+            ns,
+            ns,
+            true,
+        );
         if let Some(l0) = self.hidden.first() {
             let d0 = View::rows(&dacts[0], l0.d_out);
-            mm(d_feat, w, d0, View::transposed(l0.rows(0, w), l0.d_out), m, l0.d_out, w, true);
-            mm(d_x, dx_rs, d0, View::transposed(l0.rows(w, ns), l0.d_out), m, l0.d_out, ns, true);
+            mm(
+                d_feat,
+                w,
+                d0,
+                View::transposed(l0.rows(0, w), l0.d_out),
+                m,
+                l0.d_out,
+                w,
+                true,
+            );
+            mm(
+                d_x,
+                dx_rs,
+                d0,
+                View::transposed(l0.rows(w, ns), l0.d_out),
+                m,
+                l0.d_out,
+                ns,
+                true,
+            );
         }
     }
 }
@@ -333,7 +442,9 @@ impl HostDenoiser {
         let config = model.config().clone();
         let w = config.width;
         let read = |t: burn::tensor::Tensor<2>| -> Vec<f32> {
-            t.into_data().try_to_vec::<f32>().expect("denoiser weights are f32")
+            t.into_data()
+                .try_to_vec::<f32>()
+                .expect("denoiser weights are f32")
         };
         let mut node_w = vec![0.0; NODE_DIM * w];
         let mut node_b = vec![0.0; w];
@@ -342,7 +453,11 @@ impl HostDenoiser {
             node_w[o * w..(o + n) * w].copy_from_slice(&l.w);
             add_into(&mut node_b, l.b.as_deref().expect("embedding bias"));
         }
-        let (line_at, range_at) = if config.legacy_edge_embedding { (6, 6) } else { (3, 9) };
+        let (line_at, range_at) = if config.legacy_edge_embedding {
+            (6, 6)
+        } else {
+            (3, 9)
+        };
         let mut edge_w = vec![0.0; EDGE_DIM * w];
         let mut edge_b = vec![0.0; w];
         for (l, at) in [
@@ -362,7 +477,16 @@ impl HostDenoiser {
             .map(|l| {
                 let node_bind = HostLinear::new(&l.node_bind);
                 let mut slot = vec![0.0; K * w];
-                mm(&mut slot, w, View::rows(&slot_pe, p), View::rows(node_bind.rows(w, p), w), K, p, w, false);
+                mm(
+                    &mut slot,
+                    w,
+                    View::rows(&slot_pe, p),
+                    View::rows(node_bind.rows(w, p), w),
+                    K,
+                    p,
+                    w,
+                    false,
+                );
                 Layer {
                     node_bind,
                     edge_bind: HostLinear::new(&l.edge_bind),
@@ -440,13 +564,22 @@ impl HostDenoiser {
         let (nv, ne) = (K * NODE_DIM, NUM_EDGES * EDGE_DIM);
         assert!(b > 0, "denoiser: empty batch");
         assert!(
-            v.len() == b * nv && e.len() == b * ne && eps_v.len() == b * nv && eps_e.len() == b * ne,
+            v.len() == b * nv
+                && e.len() == b * ne
+                && eps_v.len() == b * nv
+                && eps_e.len() == b * ne,
             "denoiser: buffers do not match a batch of {b}"
         );
-        assert!(t.iter().all(|&t| t < TIME_STEPS), "denoiser: t out of 0..{TIME_STEPS}");
+        assert!(
+            t.iter().all(|&t| t < TIME_STEPS),
+            "denoiser: t out of 0..{TIME_STEPS}"
+        );
         let none = self.config.categories;
         if let Some(c) = category {
-            assert!(c.len() == b && c.iter().all(|&c| c <= none), "denoiser: category out of 0..={none}");
+            assert!(
+                c.len() == b && c.iter().all(|&c| c <= none),
+                "denoiser: category out of 0..={none}"
+            );
         }
         let blocks = b.div_ceil(self.block);
         ws.blocks.resize_with(blocks, Block::default);
@@ -492,11 +625,18 @@ impl HostDenoiser {
         let b = ws.batch;
         let (nv, ne) = (K * NODE_DIM, NUM_EDGES * EDGE_DIM);
         assert!(
-            ws.blocks.iter().take(b.div_ceil(self.block)).all(|b| b.recorded) && b > 0,
+            ws.blocks
+                .iter()
+                .take(b.div_ceil(self.block))
+                .all(|b| b.recorded)
+                && b > 0,
             "denoiser: backward without a recorded forward pass"
         );
         assert!(
-            d_eps_v.len() == b * nv && d_eps_e.len() == b * ne && d_v.len() == b * nv && d_e.len() == b * ne,
+            d_eps_v.len() == b * nv
+                && d_eps_e.len() == b * ne
+                && d_v.len() == b * nv
+                && d_e.len() == b * ne,
             "denoiser: gradient buffers do not match the recorded batch of {b}"
         );
         let cs = self.block;
@@ -518,7 +658,8 @@ impl HostDenoiser {
 
     fn layer_tapes(&self, blk: &mut Block, record: bool) {
         let count = if record { self.layers.len() } else { 1 };
-        blk.tapes.resize_with(count.max(blk.tapes.len()), LayerTape::default);
+        blk.tapes
+            .resize_with(count.max(blk.tapes.len()), LayerTape::default);
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -542,13 +683,26 @@ impl HostDenoiser {
         self.layer_tapes(blk, record);
         blk.hs.resize_with(nl + 1, Vec::new);
         blk.gs.resize_with(nl + 1, Vec::new);
-        let cat_row = |s: usize| self.category.as_ref().map(|c| &c[cats[s] * w..(cats[s] + 1) * w]);
+        let cat_row = |s: usize| {
+            self.category
+                .as_ref()
+                .map(|c| &c[cats[s] * w..(cats[s] + 1) * w])
+        };
 
         // Node embedding h⁰ = V W + b (+ category).
         let h0 = &mut blk.hs[0];
         sized(h0, rv * w);
         add_rows(h0, &self.node_b);
-        mm(h0, w, View::rows(v, NODE_DIM), View::rows(&self.node_w, w), rv, NODE_DIM, w, true);
+        mm(
+            h0,
+            w,
+            View::rows(v, NODE_DIM),
+            View::rows(&self.node_w, w),
+            rv,
+            NODE_DIM,
+            w,
+            true,
+        );
         // Edge embedding g⁰ over the dense directed entries.
         sized(&mut blk.dense, re * EDGE_DIM);
         for s in 0..n {
@@ -566,7 +720,16 @@ impl HostDenoiser {
         }
         sized(&mut blk.g, re * w);
         add_rows(&mut blk.g, &self.edge_b);
-        mm(&mut blk.g, w, View::rows(&blk.dense, EDGE_DIM), View::rows(&self.edge_w, w), re, EDGE_DIM, w, true);
+        mm(
+            &mut blk.g,
+            w,
+            View::rows(&blk.dense, EDGE_DIM),
+            View::rows(&self.edge_w, w),
+            re,
+            EDGE_DIM,
+            w,
+            true,
+        );
         if self.category.is_some() {
             for s in 0..n {
                 let c = cat_row(s).expect("category table");
@@ -602,11 +765,29 @@ impl HostDenoiser {
             let nb = &layer.node_bind;
             sized(&mut blk.time_n, n * w);
             add_rows(&mut blk.time_n, nb.b.as_deref().expect("bias"));
-            mm(&mut blk.time_n, w, View::rows(&blk.tau, td), View::rows(nb.rows(w + p, td), w), n, td, w, true);
+            mm(
+                &mut blk.time_n,
+                w,
+                View::rows(&blk.tau, td),
+                View::rows(nb.rows(w + p, td), w),
+                n,
+                td,
+                w,
+                true,
+            );
             let eb_l = &layer.edge_bind;
             sized(&mut blk.time_e, n * w);
             add_rows(&mut blk.time_e, eb_l.b.as_deref().expect("bias"));
-            mm(&mut blk.time_e, w, View::rows(&blk.tau, td), View::rows(eb_l.rows(w, td), w), n, td, w, true);
+            mm(
+                &mut blk.time_e,
+                w,
+                View::rows(&blk.tau, td),
+                View::rows(eb_l.rows(w, td), w),
+                n,
+                td,
+                w,
+                true,
+            );
 
             sized(&mut blk.vb, rv * w);
             for s in 0..n {
@@ -614,20 +795,56 @@ impl HostDenoiser {
                 dst.copy_from_slice(&layer.slot);
                 add_rows(dst, &blk.time_n[s * w..(s + 1) * w]);
             }
-            mm(&mut blk.vb, w, View::rows(&blk.hin, w), View::rows(nb.rows(0, w), w), rv, w, w, true);
+            mm(
+                &mut blk.vb,
+                w,
+                View::rows(&blk.hin, w),
+                View::rows(nb.rows(0, w), w),
+                rv,
+                w,
+                w,
+                true,
+            );
             activate(&mut blk.vb, &mut tape.d_vb, record);
 
             sized(&mut blk.eb, re * w);
             add_per_sample(&mut blk.eb, &blk.time_e, D, w);
-            mm(&mut blk.eb, w, View::rows(&blk.g, w), View::rows(eb_l.rows(0, w), w), re, w, w, true);
+            mm(
+                &mut blk.eb,
+                w,
+                View::rows(&blk.g, w),
+                View::rows(eb_l.rows(0, w), w),
+                re,
+                w,
+                w,
+                true,
+            );
             activate(&mut blk.eb, &mut tape.d_eb, record);
 
             // 2. Edge messages u_ij = W₂ SiLU(A v_i + B v_j + C e_ij + b₁) + b₂.
             let m1 = &layer.edge_mlp1;
             sized(&mut blk.a, rv * w);
-            mm(&mut blk.a, w, View::rows(&blk.vb, w), View::rows(m1.rows(0, w), w), rv, w, w, false);
+            mm(
+                &mut blk.a,
+                w,
+                View::rows(&blk.vb, w),
+                View::rows(m1.rows(0, w), w),
+                rv,
+                w,
+                w,
+                false,
+            );
             sized(&mut blk.bj, rv * w);
-            mm(&mut blk.bj, w, View::rows(&blk.vb, w), View::rows(m1.rows(w, w), w), rv, w, w, false);
+            mm(
+                &mut blk.bj,
+                w,
+                View::rows(&blk.vb, w),
+                View::rows(m1.rows(w, w), w),
+                rv,
+                w,
+                w,
+                false,
+            );
             sized(&mut blk.hid, re * w);
             add_rows(&mut blk.hid, m1.b.as_deref().expect("bias"));
             for s in 0..n {
@@ -642,7 +859,16 @@ impl HostDenoiser {
                     }
                 }
             }
-            mm(&mut blk.hid, w, View::rows(&blk.eb, w), View::rows(m1.rows(2 * w, w), w), re, w, w, true);
+            mm(
+                &mut blk.hid,
+                w,
+                View::rows(&blk.eb, w),
+                View::rows(m1.rows(2 * w, w), w),
+                re,
+                w,
+                w,
+                true,
+            );
             activate(&mut blk.hid, &mut tape.d_hid, record);
             let m2 = &layer.edge_mlp2;
             sized(&mut tape.u, re * w);
@@ -705,11 +931,29 @@ impl HostDenoiser {
             let no = &layer.node_out;
             sized(&mut blk.pooled, n * w);
             add_rows(&mut blk.pooled, no.b.as_deref().expect("bias"));
-            mm(&mut blk.pooled, w, View::rows(&blk.pool, w), View::rows(no.rows(w, w), w), n, w, w, true);
+            mm(
+                &mut blk.pooled,
+                w,
+                View::rows(&blk.pool, w),
+                View::rows(no.rows(w, w), w),
+                n,
+                w,
+                w,
+                true,
+            );
             let out = &mut blk.hs[l + 1];
             sized(out, rv * w);
             add_per_sample(out, &blk.pooled, K, w);
-            mm(out, w, View::rows(&blk.msg, w), View::rows(no.rows(0, w), w), rv, w, w, true);
+            mm(
+                out,
+                w,
+                View::rows(&blk.msg, w),
+                View::rows(no.rows(0, w), w),
+                rv,
+                w,
+                w,
+                true,
+            );
             activate(out, &mut tape.d_out, record);
             // The next layer's edge input and the wide skip's rows.
             blk.g.clear();
@@ -722,23 +966,57 @@ impl HostDenoiser {
         sized(&mut blk.hw, rv * w);
         add_rows(&mut blk.hw, self.node_wide.b.as_deref().expect("bias"));
         for (l, h) in blk.hs.iter().enumerate() {
-            mm(&mut blk.hw, w, View::rows(h, w), View::rows(self.node_wide.rows(l * w, w), w), rv, w, w, true);
+            mm(
+                &mut blk.hw,
+                w,
+                View::rows(h, w),
+                View::rows(self.node_wide.rows(l * w, w), w),
+                rv,
+                w,
+                w,
+                true,
+            );
         }
         sized(&mut blk.gw, ru * w);
         add_rows(&mut blk.gw, self.edge_wide.b.as_deref().expect("bias"));
         for (l, g) in blk.gs.iter().enumerate() {
-            mm(&mut blk.gw, w, View::rows(g, w), View::rows(self.edge_wide.rows(l * w, w), w), ru, w, w, true);
+            mm(
+                &mut blk.gw,
+                w,
+                View::rows(g, w),
+                View::rows(self.edge_wide.rows(l * w, w), w),
+                ru,
+                w,
+                w,
+                true,
+            );
         }
         let heads = self.node_heads.len() + self.edge_heads.len();
         blk.head_acts.resize_with(heads, Vec::new);
         for (k, (&(o, _), head)) in NODE_SLICES.iter().zip(&self.node_heads).enumerate() {
             let acts = &mut blk.head_acts[if record { k } else { 0 }];
-            head.forward(&blk.hw, View::cols(v, NODE_DIM, o), &mut eps_v[o..], NODE_DIM, rv, w, acts);
+            head.forward(
+                &blk.hw,
+                View::cols(v, NODE_DIM, o),
+                &mut eps_v[o..],
+                NODE_DIM,
+                rv,
+                w,
+                acts,
+            );
         }
         let base = self.node_heads.len();
         for (k, (&(o, _), head)) in EDGE_SLICES.iter().zip(&self.edge_heads).enumerate() {
             let acts = &mut blk.head_acts[if record { base + k } else { 0 }];
-            head.forward(&blk.gw, View::cols(e, EDGE_DIM, o), &mut eps_e[o..], EDGE_DIM, ru, w, acts);
+            head.forward(
+                &blk.gw,
+                View::cols(e, EDGE_DIM, o),
+                &mut eps_e[o..],
+                EDGE_DIM,
+                ru,
+                w,
+                acts,
+            );
         }
         blk.recorded = record;
     }
@@ -762,21 +1040,57 @@ impl HostDenoiser {
         sized(&mut blk.dgw, ru * w);
         for (k, (&(o, _), head)) in NODE_SLICES.iter().zip(&self.node_heads).enumerate() {
             let d_out = View::cols(d_eps_v, NODE_DIM, o);
-            head.backward(d_out, &blk.head_acts[k], &mut blk.dhw, &mut d_v[o..], NODE_DIM, rv, w, &mut blk.dacts);
+            head.backward(
+                d_out,
+                &blk.head_acts[k],
+                &mut blk.dhw,
+                &mut d_v[o..],
+                NODE_DIM,
+                rv,
+                w,
+                &mut blk.dacts,
+            );
         }
         let base = self.node_heads.len();
         for (k, (&(o, _), head)) in EDGE_SLICES.iter().zip(&self.edge_heads).enumerate() {
             let d_out = View::cols(d_eps_e, EDGE_DIM, o);
-            head.backward(d_out, &blk.head_acts[base + k], &mut blk.dgw, &mut d_e[o..], EDGE_DIM, ru, w, &mut blk.dacts);
+            head.backward(
+                d_out,
+                &blk.head_acts[base + k],
+                &mut blk.dgw,
+                &mut d_e[o..],
+                EDGE_DIM,
+                ru,
+                w,
+                &mut blk.dacts,
+            );
         }
         // Wide skips.
         blk.dhs.resize_with(nl + 1, Vec::new);
         blk.dgs.resize_with(nl + 1, Vec::new);
         for l in 0..=nl {
             sized(&mut blk.dhs[l], rv * w);
-            mm(&mut blk.dhs[l], w, View::rows(&blk.dhw, w), View::transposed(self.node_wide.rows(l * w, w), w), rv, w, w, false);
+            mm(
+                &mut blk.dhs[l],
+                w,
+                View::rows(&blk.dhw, w),
+                View::transposed(self.node_wide.rows(l * w, w), w),
+                rv,
+                w,
+                w,
+                false,
+            );
             sized(&mut blk.dgs[l], ru * w);
-            mm(&mut blk.dgs[l], w, View::rows(&blk.dgw, w), View::transposed(self.edge_wide.rows(l * w, w), w), ru, w, w, false);
+            mm(
+                &mut blk.dgs[l],
+                w,
+                View::rows(&blk.dgw, w),
+                View::transposed(self.edge_wide.rows(l * w, w), w),
+                ru,
+                w,
+                w,
+                false,
+            );
         }
         blk.dh.clear();
         blk.dh.extend_from_slice(&blk.dhs[nl]);
@@ -792,15 +1106,36 @@ impl HostDenoiser {
             blk.t1.extend_from_slice(&blk.dh);
             mul_into(&mut blk.t1, &tape.d_out);
             sized(&mut blk.dv1, rv * w);
-            mm(&mut blk.dv1, w, View::rows(&blk.t1, w), View::transposed(no.rows(0, w), w), rv, w, w, false);
+            mm(
+                &mut blk.dv1,
+                w,
+                View::rows(&blk.t1, w),
+                View::transposed(no.rows(0, w), w),
+                rv,
+                w,
+                w,
+                false,
+            );
             sized(&mut blk.dpool, n * w);
             for s in 0..n {
                 for i in 0..K {
-                    add_into(&mut blk.dpool[s * w..(s + 1) * w], &blk.t1[(s * K + i) * w..][..w]);
+                    add_into(
+                        &mut blk.dpool[s * w..(s + 1) * w],
+                        &blk.t1[(s * K + i) * w..][..w],
+                    );
                 }
             }
             sized(&mut blk.dgmax, n * w);
-            mm(&mut blk.dgmax, w, View::rows(&blk.dpool, w), View::transposed(no.rows(w, w), w), n, w, w, false);
+            mm(
+                &mut blk.dgmax,
+                w,
+                View::rows(&blk.dpool, w),
+                View::transposed(no.rows(w, w), w),
+                n,
+                w,
+                w,
+                false,
+            );
             for s in 0..n {
                 for c in 0..w {
                     let i = tape.argmax[s * w + c] as usize;
@@ -812,7 +1147,16 @@ impl HostDenoiser {
             blk.t1.extend_from_slice(&blk.dv1);
             mul_into(&mut blk.t1, &tape.d_self);
             sized(&mut blk.dvb, rv * w);
-            mm(&mut blk.dvb, w, View::rows(&blk.t1, w), View::transposed(&layer.self_term.w, w), rv, w, w, false);
+            mm(
+                &mut blk.dvb,
+                w,
+                View::rows(&blk.t1, w),
+                View::transposed(&layer.self_term.w, w),
+                rv,
+                w,
+                w,
+                false,
+            );
             // 3–5. Attention: into u, α → logits → q, k.
             blk.du.clear();
             blk.du.extend_from_slice(&blk.dg);
@@ -830,28 +1174,63 @@ impl HostDenoiser {
                             let row = (s * D + i * K + j) * w + hh * hc;
                             let uij = &tape.u[row..row + hc];
                             da[j] = dm.iter().zip(uij).map(|(x, y)| x * y).sum();
-                            blk.du[row..row + hc].iter_mut().zip(dm).for_each(|(d, m)| *d += al[j] * m);
+                            blk.du[row..row + hc]
+                                .iter_mut()
+                                .zip(dm)
+                                .for_each(|(d, m)| *d += al[j] * m);
                         }
                         let dot: f32 = al.iter().zip(da.iter()).map(|(a, d)| a * d).sum();
-                        for j in 0..K {
-                            da[j] = al[j] * (da[j] - dot) * self.scale;
+                        for (d, a) in da.iter_mut().zip(al) {
+                            *d = a * (*d - dot) * self.scale;
                         }
-                        for j in 0..K {
-                            let c = da[j];
+                        for (j, &c) in da.iter().enumerate() {
                             let kj = &tape.k[(s * K + j) * w + hh * hc..][..hc];
                             let qi = &tape.q[(s * K + i) * w + hh * hc..][..hc];
-                            blk.dq[(s * K + i) * w + hh * hc..][..hc].iter_mut().zip(kj).for_each(|(d, k)| *d += c * k);
-                            blk.dk[(s * K + j) * w + hh * hc..][..hc].iter_mut().zip(qi).for_each(|(d, q)| *d += c * q);
+                            blk.dq[(s * K + i) * w + hh * hc..][..hc]
+                                .iter_mut()
+                                .zip(kj)
+                                .for_each(|(d, k)| *d += c * k);
+                            blk.dk[(s * K + j) * w + hh * hc..][..hc]
+                                .iter_mut()
+                                .zip(qi)
+                                .for_each(|(d, q)| *d += c * q);
                         }
                     }
                 }
             }
-            mm(&mut blk.dvb, w, View::rows(&blk.dq, w), View::transposed(&layer.query.w, w), rv, w, w, true);
-            mm(&mut blk.dvb, w, View::rows(&blk.dk, w), View::transposed(&layer.key.w, w), rv, w, w, true);
+            mm(
+                &mut blk.dvb,
+                w,
+                View::rows(&blk.dq, w),
+                View::transposed(&layer.query.w, w),
+                rv,
+                w,
+                w,
+                true,
+            );
+            mm(
+                &mut blk.dvb,
+                w,
+                View::rows(&blk.dk, w),
+                View::transposed(&layer.key.w, w),
+                rv,
+                w,
+                w,
+                true,
+            );
             // 2. Edge messages.
             let m1 = &layer.edge_mlp1;
             sized(&mut blk.hid, re * w);
-            mm(&mut blk.hid, w, View::rows(&blk.du, w), View::transposed(&layer.edge_mlp2.w, w), re, w, w, false);
+            mm(
+                &mut blk.hid,
+                w,
+                View::rows(&blk.du, w),
+                View::transposed(&layer.edge_mlp2.w, w),
+                re,
+                w,
+                w,
+                false,
+            );
             mul_into(&mut blk.hid, &tape.d_hid);
             sized(&mut blk.da, rv * w);
             sized(&mut blk.db, rv * w);
@@ -864,22 +1243,85 @@ impl HostDenoiser {
                     }
                 }
             }
-            mm(&mut blk.dvb, w, View::rows(&blk.da, w), View::transposed(m1.rows(0, w), w), rv, w, w, true);
-            mm(&mut blk.dvb, w, View::rows(&blk.db, w), View::transposed(m1.rows(w, w), w), rv, w, w, true);
+            mm(
+                &mut blk.dvb,
+                w,
+                View::rows(&blk.da, w),
+                View::transposed(m1.rows(0, w), w),
+                rv,
+                w,
+                w,
+                true,
+            );
+            mm(
+                &mut blk.dvb,
+                w,
+                View::rows(&blk.db, w),
+                View::transposed(m1.rows(w, w), w),
+                rv,
+                w,
+                w,
+                true,
+            );
             sized(&mut blk.eb, re * w);
-            mm(&mut blk.eb, w, View::rows(&blk.hid, w), View::transposed(m1.rows(2 * w, w), w), re, w, w, false);
+            mm(
+                &mut blk.eb,
+                w,
+                View::rows(&blk.hid, w),
+                View::transposed(m1.rows(2 * w, w), w),
+                re,
+                w,
+                w,
+                false,
+            );
             mul_into(&mut blk.eb, &tape.d_eb);
             // 1. Bindings → the layer's inputs, plus the wide skip of the layer below.
-            mm(&mut blk.dg, w, View::rows(&blk.eb, w), View::transposed(layer.edge_bind.rows(0, w), w), re, w, w, false);
+            mm(
+                &mut blk.dg,
+                w,
+                View::rows(&blk.eb, w),
+                View::transposed(layer.edge_bind.rows(0, w), w),
+                re,
+                w,
+                w,
+                false,
+            );
             scatter_upper(&mut blk.dg, &blk.dgs[l], n, w);
             mul_into(&mut blk.dvb, &tape.d_vb);
-            mm(&mut blk.dh, w, View::rows(&blk.dvb, w), View::transposed(layer.node_bind.rows(0, w), w), rv, w, w, false);
+            mm(
+                &mut blk.dh,
+                w,
+                View::rows(&blk.dvb, w),
+                View::transposed(layer.node_bind.rows(0, w), w),
+                rv,
+                w,
+                w,
+                false,
+            );
             add_into(&mut blk.dh, &blk.dhs[l]);
         }
         // Embeddings.
-        mm(d_v, NODE_DIM, View::rows(&blk.dh, w), View::transposed(&self.node_w, w), rv, w, NODE_DIM, true);
+        mm(
+            d_v,
+            NODE_DIM,
+            View::rows(&blk.dh, w),
+            View::transposed(&self.node_w, w),
+            rv,
+            w,
+            NODE_DIM,
+            true,
+        );
         sized(&mut blk.ddense, re * EDGE_DIM);
-        mm(&mut blk.ddense, EDGE_DIM, View::rows(&blk.dg, w), View::transposed(&self.edge_w, w), re, w, EDGE_DIM, false);
+        mm(
+            &mut blk.ddense,
+            EDGE_DIM,
+            View::rows(&blk.dg, w),
+            View::transposed(&self.edge_w, w),
+            re,
+            w,
+            EDGE_DIM,
+            false,
+        );
         for s in 0..n {
             for i in 0..K {
                 for j in 0..K {

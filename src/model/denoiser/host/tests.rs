@@ -58,14 +58,23 @@ fn case(b: usize, seed: u64, categories: Option<usize>) -> Case {
     }
 }
 
-fn burn_inputs(c: &Case, device: &burn::tensor::Device) -> (Tensor<3>, Tensor<3>, Tensor<1, Int>, Option<Tensor<1, Int>>) {
+fn burn_inputs(
+    c: &Case,
+    device: &burn::tensor::Device,
+) -> (Tensor<3>, Tensor<3>, Tensor<1, Int>, Option<Tensor<1, Int>>) {
     let b = c.t.len();
     let ints = |x: &[usize]| {
-        Tensor::<1, Int>::from_data(TensorData::new(x.iter().map(|&x| x as i64).collect::<Vec<_>>(), [b]), device)
+        Tensor::<1, Int>::from_data(
+            TensorData::new(x.iter().map(|&x| x as i64).collect::<Vec<_>>(), [b]),
+            device,
+        )
     };
     (
         Tensor::from_data(TensorData::new(c.v.clone(), [b, K, NODE_DIM]), device),
-        Tensor::from_data(TensorData::new(c.e.clone(), [b, NUM_EDGES, EDGE_DIM]), device),
+        Tensor::from_data(
+            TensorData::new(c.e.clone(), [b, NUM_EDGES, EDGE_DIM]),
+            device,
+        ),
         ints(&c.t),
         c.cats.as_deref().map(ints),
     )
@@ -75,10 +84,24 @@ fn flat(x: Tensor<3>) -> Vec<f32> {
     x.into_data().try_to_vec::<f32>().expect("f32")
 }
 
-fn host_forward(h: &HostDenoiser, c: &Case, ws: &mut Workspace, record: bool) -> (Vec<f32>, Vec<f32>) {
+fn host_forward(
+    h: &HostDenoiser,
+    c: &Case,
+    ws: &mut Workspace,
+    record: bool,
+) -> (Vec<f32>, Vec<f32>) {
     let mut ev = vec![0.0; c.v.len()];
     let mut ee = vec![0.0; c.e.len()];
-    h.forward(&c.v, &c.e, &c.t, c.cats.as_deref(), &mut ev, &mut ee, ws, record);
+    h.forward(
+        &c.v,
+        &c.e,
+        &c.t,
+        c.cats.as_deref(),
+        &mut ev,
+        &mut ee,
+        ws,
+        record,
+    );
     (ev, ee)
 }
 
@@ -86,7 +109,11 @@ fn host_forward(h: &HostDenoiser, c: &Case, ws: &mut Workspace, record: bool) ->
 fn rel_diff(a: &[f32], b: &[f32]) -> f64 {
     assert_eq!(a.len(), b.len());
     let scale = b.iter().fold(1.0f64, |m, x| m.max(x.abs() as f64));
-    a.iter().zip(b).map(|(x, y)| (*x as f64 - *y as f64).abs()).fold(0.0, f64::max) / scale
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (*x as f64 - *y as f64).abs())
+        .fold(0.0, f64::max)
+        / scale
 }
 
 fn configs() -> Vec<(&'static str, DenoiserConfig)> {
@@ -97,8 +124,10 @@ fn configs() -> Vec<(&'static str, DenoiserConfig)> {
     let mut no_hidden = config(16, 1, 3);
     no_hidden.node_head_hidden.clear();
     no_hidden.edge_head_hidden.clear();
-    let mut shipped = DenoiserConfig::default();
-    shipped.category_layers = true;
+    let shipped = DenoiserConfig {
+        category_layers: true,
+        ..DenoiserConfig::default()
+    };
     vec![
         ("unconditional", config(32, 2, 0)),
         ("legacy edge embedding", legacy),
@@ -120,7 +149,10 @@ fn forward_matches_the_burn_model() {
             let (bv, be) = m.forward(v, e, t, cat);
             let (hv, he) = host_forward(&h, &c, &mut Workspace::default(), false);
             let (dv, de) = (rel_diff(&hv, &flat(bv)), rel_diff(&he, &flat(be)));
-            assert!(dv < 2e-5 && de < 2e-5, "{name}, B = {b}: ε̂_V off by {dv:e}, ε̂_E by {de:e}");
+            assert!(
+                dv < 2e-5 && de < 2e-5,
+                "{name}, B = {b}: ε̂_V off by {dv:e}, ε̂_E by {de:e}"
+            );
         }
     }
 }
@@ -154,7 +186,10 @@ fn input_gradient_matches_burn_autodiff() {
         let mut he = vec![0.0; c.e.len()];
         h.backward(&mut ws, &rv, &re, &mut hv, &mut he);
         let (dv, de) = (rel_diff(&hv, &gv), rel_diff(&he, &ge));
-        assert!(dv < 5e-5 && de < 5e-5, "{name}: ∂/∂V off by {dv:e}, ∂/∂E by {de:e}");
+        assert!(
+            dv < 5e-5 && de < 5e-5,
+            "{name}: ∂/∂V off by {dv:e}, ∂/∂E by {de:e}"
+        );
         // A second backward over the same recording gives the same gradient.
         let mut hv2 = vec![0.0; c.v.len()];
         let mut he2 = vec![0.0; c.e.len()];
@@ -172,7 +207,10 @@ fn results_do_not_depend_on_threads_or_a_reused_workspace() {
     let big = case(6, 1, Some(4));
     let small = case(2, 2, None);
     let run = |threads: usize, ws: &mut Workspace| {
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("pool");
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("pool");
         pool.install(|| {
             let out = host_forward(&h, &big, ws, true);
             let mut gv = vec![0.0; big.v.len()];

@@ -28,6 +28,9 @@ pub struct Predictor {
     e: Vec<f32>,
     eps_v: Vec<f32>,
     eps_e: Vec<f32>,
+    /// The forward's timesteps and categories, [rows].
+    t: Vec<usize>,
+    cats: Vec<usize>,
 }
 
 fn flat(x: &Tensor<3>) -> Vec<f32> {
@@ -71,6 +74,8 @@ impl Predictor {
             e: Vec::new(),
             eps_v: Vec::new(),
             eps_e: Vec::new(),
+            t: Vec::new(),
+            cats: Vec::new(),
         }
     }
 
@@ -90,20 +95,20 @@ impl Predictor {
         self.v = doubled(flat(v), mixed);
         self.e = doubled(flat(e), mixed);
         let none = self.host.config().categories;
-        let cats: Option<Vec<usize>> = self.category.map(|c| {
-            let mut cats = vec![c; b];
-            if mixed {
-                cats.extend(std::iter::repeat_n(none, b));
-            }
-            cats
-        });
+        self.t.clear();
+        self.t.resize(rows, t);
+        self.cats.clear();
+        if let Some(c) = self.category {
+            self.cats.resize(b, c);
+            self.cats.resize(rows, none);
+        }
         self.eps_v.resize(rows * K * NODE_DIM, 0.0);
         self.eps_e.resize(rows * NUM_EDGES * EDGE_DIM, 0.0);
         self.host.forward(
             &self.v,
             &self.e,
-            &vec![t; rows],
-            cats.as_deref(),
+            &self.t,
+            self.category.map(|_| self.cats.as_slice()),
             &mut self.eps_v,
             &mut self.eps_e,
             &mut self.ws,

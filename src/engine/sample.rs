@@ -206,9 +206,10 @@ fn check_state(
 }
 
 /// [`sample`] with optional loss guidance (method.md §8.2, DPS): in steps with t < n_g,
-/// ε̂ and x̂₀ are computed on the autodiff device, ℓ(x̂₀ ⊙ scales) is back-propagated through the
-/// SDF field and the denoiser to x_t, and −∇ℓ is added after the usual update. The model's
-/// weights stay on the plain device (no weight gradients). The mobility states are drawn from
+/// ε̂ comes from the host denoiser with its forward recorded, ∇ℓ(x̂₀ ⊙ scales) is taken at x̂₀
+/// through the SDF field (burn autodiff), pushed to x_t through x̂₀ = (x_t − n ε̂(x_t)) / s and
+/// the denoiser's input gradient ([`Predictor::backward`]), and −∇ℓ is added after the usual
+/// update. No weight gradients are computed. The mobility states are drawn from
 /// `Rng::fork(seed, step)`, apart from the diffusion noise, so a seed fixes the result and
 /// guided and unguided runs share their noise.
 pub fn sample_guided(

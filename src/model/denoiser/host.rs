@@ -592,15 +592,11 @@ impl HostDenoiser {
             .enumerate()
             .for_each(|(k, ((ov, oe), blk))| {
                 let (s0, n) = (k * cs, ov.len() / nv);
-                let cats: Vec<usize> = match category {
-                    Some(c) => c[s0..s0 + n].to_vec(),
-                    None => vec![none; n],
-                };
                 self.forward_block(
                     &v[s0 * nv..(s0 + n) * nv],
                     &e[s0 * ne..(s0 + n) * ne],
                     &t[s0..s0 + n],
-                    &cats,
+                    category.map(|c| &c[s0..s0 + n]),
                     ov,
                     oe,
                     blk,
@@ -668,7 +664,7 @@ impl HostDenoiser {
         v: &[f32],
         e: &[f32],
         t: &[usize],
-        cats: &[usize],
+        cats: Option<&[usize]>,
         eps_v: &mut [f32],
         eps_e: &mut [f32],
         blk: &mut Block,
@@ -683,10 +679,12 @@ impl HostDenoiser {
         self.layer_tapes(blk, record);
         blk.hs.resize_with(nl + 1, Vec::new);
         blk.gs.resize_with(nl + 1, Vec::new);
+        // Sample s's category row ("no category" without a category).
+        let cat_of = |s: usize| cats.map_or(self.config.categories, |c| c[s]);
         let cat_row = |s: usize| {
             self.category
                 .as_ref()
-                .map(|c| &c[cats[s] * w..(cats[s] + 1) * w])
+                .map(|c| &c[cat_of(s) * w..(cat_of(s) + 1) * w])
         };
 
         // Node embedding h⁰ = V W + b (+ category).
@@ -755,7 +753,7 @@ impl HostDenoiser {
             if let Some(cl) = &self.category_layers {
                 let lw = nl * w;
                 for s in 0..n {
-                    let row = &cl[cats[s] * lw + l * w..][..w];
+                    let row = &cl[cat_of(s) * lw + l * w..][..w];
                     add_rows(&mut blk.hin[s * K * w..(s + 1) * K * w], row);
                     add_rows(&mut blk.g[s * D * w..(s + 1) * D * w], row);
                 }

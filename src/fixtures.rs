@@ -4,6 +4,10 @@
 //! articulated objects without any data set. [`cabinet`] is the hand-written example shipped
 //! as `examples/cabinet.json` (3 parts: body, door, drawer); [`eight_part`] builds an 8-part
 //! object using every joint type (revolute, prismatic, screw, fixed), the worst case of export.
+//! [`tiny_weights`] writes a tiny, untrained but complete weights directory, for the service
+//! tests and the API fuzzing run, where the engine must run for real but fast.
+
+use std::path::Path;
 
 use nalgebra::{Point3, Vector3};
 
@@ -12,6 +16,72 @@ use crate::shape::{Axis, PartShape, Primitive};
 
 /// The example cabinet JSON (`examples/cabinet.json`).
 pub const CABINET_JSON: &str = include_str!("../examples/cabinet.json");
+
+/// Write a tiny, randomly initialised (untrained) but real weights directory into `dir`:
+/// denoiser (width 16, one layer, every category), shape prior and manifest. The whole engine
+/// path (denoiser, schedule, projection, shape decoder, meshing, export) runs on it in
+/// milliseconds per step.
+pub fn tiny_weights(dir: &Path) -> Result<(), crate::model::weights::WeightsError> {
+    use crate::io::manifest::{Entry, Manifest, to_string};
+    use crate::model::denoiser::{Denoiser, DenoiserConfig};
+    use crate::model::shape_prior::{ShapePrior, ShapePriorConfig};
+    use crate::model::weights::{WeightsError, save};
+    let io = |path: &Path| {
+        let path = path.display().to_string();
+        move |source| WeightsError::Io { path, source }
+    };
+    std::fs::create_dir_all(dir).map_err(io(dir))?;
+    let device = crate::model::cpu();
+    let sp_cfg = ShapePriorConfig {
+        latent: 128,
+        decoder_hidden: 16,
+        decoder_blocks: 1,
+        encoder_hidden: 16,
+        encoder_blocks: 1,
+        pe_freqs: 2,
+        code_every_block: false,
+    };
+    let sp = ShapePrior::new(&sp_cfg, &device);
+    let sp_sha = save(&sp, &dir.join("shape_prior.safetensors"))?;
+    let categories: Vec<String> = crate::data::categories::CATEGORIES
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    let dn_cfg = DenoiserConfig {
+        width: 16,
+        layers: 1,
+        head_channels: 16,
+        t_pe_dim: 8,
+        slot_pe_dim: 8,
+        node_head_hidden: vec![16],
+        edge_head_hidden: vec![16],
+        categories: categories.len(),
+        legacy_edge_embedding: false,
+        category_layers: false,
+    };
+    let dn = Denoiser::new(&dn_cfg, &device).expect("the tiny denoiser config is valid");
+    let dn_sha = save(&dn, &dir.join("denoiser.safetensors"))?;
+    let m = Manifest {
+        shape_prior: Entry {
+            file: "shape_prior.safetensors".into(),
+            sha256: sp_sha,
+            config: sp_cfg,
+        },
+        denoiser: Entry {
+            file: "denoiser.safetensors".into(),
+            sha256: dn_sha,
+            config: dn_cfg,
+        },
+        codebook: None,
+        feature_scales: crate::graph::FeatureScales::default(),
+        categories,
+        data: serde_json::json!({"note": "untrained test weights"}),
+        training: serde_json::Value::Null,
+        metrics: serde_json::Value::Null,
+    };
+    let path = dir.join("manifest.json");
+    std::fs::write(&path, to_string(&m)).map_err(io(&path))
+}
 
 /// A part with a plain box shape centred at `c` with half-extents `h` (tests and examples).
 pub fn box_part(name: &str, c: [f64; 3], h: [f64; 3]) -> Part {

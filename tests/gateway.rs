@@ -1,8 +1,12 @@
-//! The shipped gateway config (`deploy/Caddyfile`) runs for real on loopback in front of the
-//! server: one REST job, its SSE stream (events must arrive while the job runs, not buffered
-//! to the end) and a gRPC `WatchJob` stream (h2c) all go through Caddy. The only edits to the
-//! file are the addresses and turning off Caddy's admin endpoint and automatic HTTPS.
-//! Requires Debian's `caddy` (`bash .ci/setup`).
+//! The shipped gateway configs run for real on loopback in front of the server: one REST job,
+//! its SSE stream (events must arrive while the job runs, not buffered to the end) and a gRPC
+//! `WatchJob` stream (h2c) all go through the gateway.
+//! - `deploy/Caddyfile` with Debian's `caddy`: REST and gRPC on one port. The only edits are
+//!   the addresses and turning off Caddy's admin endpoint and automatic HTTPS.
+//! - `deploy/nginx.conf` with Debian's `nginx`: REST on one port, gRPC on its own. The only
+//!   edits are the addresses and the paths nginx writes (pid, logs, temp files).
+//!
+//! Requires both (`bash .ci/setup`).
 
 mod support;
 
@@ -14,9 +18,10 @@ use serde_json::{Value, json};
 use support::{Opts, SseReader, cloud, start};
 use tokio_stream::StreamExt as _;
 
-struct Caddy(Child);
+/// A gateway process, killed when the test ends.
+struct Gateway(Child);
 
-impl Drop for Caddy {
+impl Drop for Gateway {
     fn drop(&mut self) {
         let _ = self.0.kill();
         let _ = self.0.wait();
@@ -59,7 +64,7 @@ async fn rest_sse_and_grpc_through_caddy() {
         String::from_utf8_lossy(&v.stderr)
     );
     let log = s.root.path().join("caddy.log");
-    let mut caddy = Caddy(
+    let mut caddy = Gateway(
         Command::new("caddy")
             .args(["run", "--adapter", "caddyfile", "--config"])
             .arg(&path)
@@ -81,9 +86,103 @@ async fn rest_sse_and_grpc_through_caddy() {
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
 
+    exercise(&gw, &gw).await;
+    s.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn rest_sse_and_grpc_through_nginx() {
+    let s = start(Opts::default()).await;
+    let (rest_port, grpc_port) = (free_port(), free_port());
+    let dir = s.root.path().join("nginx");
+    std::fs::create_dir_all(&dir).unwrap();
+    // nginx started by root runs its workers as `nobody`: they must be able to write the
+    // temp-file folders.
+    use std::os::unix::fs::PermissionsExt as _;
+    std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o777)).unwrap();
+    let d = dir.display();
+    let shipped =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/deploy/nginx.conf")).unwrap();
+    let cfg = shipped
+        .replace("server physnap:8080;", &format!("server {};", s.addrs.http))
+        .replace(
+            "server physnap:50051;",
+            &format!("server {};", s.addrs.grpc),
+        )
+        .replace("listen 8080;", &format!("listen 127.0.0.1:{rest_port};"))
+        .replace(
+            "listen 50051 http2;",
+            &format!("listen 127.0.0.1:{grpc_port} http2;"),
+        )
+        .replace(
+            "http {\n",
+            &format!(
+                "http {{\n    access_log off;\n    client_body_temp_path {d}/body;\n    \
+                 proxy_temp_path {d}/proxy;\n    fastcgi_temp_path {d}/fastcgi;\n    \
+                 uwsgi_temp_path {d}/uwsgi;\n    scgi_temp_path {d}/scgi;\n"
+            ),
+        );
+    assert!(
+        cfg.contains(&format!("listen 127.0.0.1:{grpc_port} http2;"))
+            && cfg.contains(&format!("{d}/body"))
+            && !cfg.contains("physnap:"),
+        "nginx.conf changed shape; update the test's substitutions:\n{cfg}"
+    );
+    let conf = dir.join("nginx.conf");
+    std::fs::write(&conf, &cfg).unwrap();
+    let log = dir.join("error.log");
+    let run = |extra: &[&str]| {
+        let mut c = Command::new("nginx");
+        c.arg("-p")
+            .arg(&dir)
+            .arg("-c")
+            .arg(&conf)
+            .arg("-e")
+            .arg(&log);
+        c.arg("-g")
+            .arg(format!("pid {d}/nginx.pid; daemon off;"))
+            .args(extra);
+        c
+    };
+    let t = run(&["-t"])
+        .output()
+        .expect("nginx is required for the gateway test: run `bash .ci/setup`");
+    assert!(
+        t.status.success(),
+        "nginx -t: {}\nconfig:\n{cfg}",
+        String::from_utf8_lossy(&t.stderr)
+    );
+    let mut nginx = Gateway(
+        run(&[])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let rest = format!("http://127.0.0.1:{rest_port}");
+    let grpc = format!("http://127.0.0.1:{grpc_port}");
+    let c = reqwest::Client::new();
+    let t0 = Instant::now();
+    while c.get(format!("{rest}/v1/categories")).send().await.is_err() {
+        assert!(
+            t0.elapsed() < Duration::from_secs(10),
+            "nginx did not start (exit: {:?}):\n{}\nconfig:\n{cfg}",
+            nginx.0.try_wait(),
+            std::fs::read_to_string(&log).unwrap_or_default()
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    exercise(&rest, &grpc).await;
+    s.shutdown().await;
+}
+
+/// One REST job through the gateway at `rest`, its SSE stream (progress must arrive while the
+/// job runs, not buffered to the end), then a gRPC `WatchJob` of it through `grpc` (h2c).
+async fn exercise(rest: &str, grpc: &str) {
+    let c = reqwest::Client::new();
     // REST submit + SSE through the gateway: progress arrives before the end of the job.
     let r = c
-        .post(format!("{gw}/v1/jobs"))
+        .post(format!("{rest}/v1/jobs"))
         .json(
             &json!({"points": cloud(32), "samples": 4, "resolution": 8, "seed": 2,
                        "sampler": "ddpm", "steps": 1000,
@@ -98,7 +197,7 @@ async fn rest_sse_and_grpc_through_caddy() {
         .unwrap()
         .to_string();
     let mut sse = SseReader::new(
-        c.get(format!("{gw}/v1/jobs/{id}/events"))
+        c.get(format!("{rest}/v1/jobs/{id}/events"))
             .send()
             .await
             .unwrap(),
@@ -121,7 +220,7 @@ async fn rest_sse_and_grpc_through_caddy() {
         "events were buffered by the gateway: first progress only {lead:?} before done"
     );
     // gRPC (h2c) through the same gateway port: WatchJob replays to `done`, then OK.
-    let mut cl = JobServiceClient::connect(gw.clone()).await.unwrap();
+    let mut cl = JobServiceClient::connect(grpc.to_string()).await.unwrap();
     let mut stream = cl
         .watch_job(pb::WatchJobRequest {
             id: id.clone(),
@@ -142,5 +241,4 @@ async fn rest_sse_and_grpc_through_caddy() {
         .unwrap()
         .into_inner();
     assert_eq!(j.state, pb::State::Succeeded as i32);
-    s.shutdown().await;
 }

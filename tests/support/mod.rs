@@ -7,68 +7,14 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
 
-use physnap::graph::FeatureScales;
-use physnap::io::manifest::{Entry, Manifest, to_string as manifest_to_string};
-use physnap::model::denoiser::{Denoiser, DenoiserConfig};
-use physnap::model::shape_prior::{ShapePrior, ShapePriorConfig};
-use physnap::model::weights;
 use physnap::service::auth::Tenants;
 use physnap::service::jobs::Service;
 use physnap::service::server::{BoundAddrs, ServeConfig, Server};
 
-/// Write a tiny, randomly initialised (untrained) but real weights directory: the engine
-/// path (denoiser, schedule, projection, shape decoder, meshing, export) runs for real.
+/// Write a tiny, randomly initialised (untrained) but real weights directory
+/// ([`physnap::fixtures::tiny_weights`]).
 pub fn tiny_weights(dir: &Path) {
-    std::fs::create_dir_all(dir).unwrap();
-    let device = physnap::model::cpu();
-    let sp_cfg = ShapePriorConfig {
-        latent: 128,
-        decoder_hidden: 16,
-        decoder_blocks: 1,
-        encoder_hidden: 16,
-        encoder_blocks: 1,
-        pe_freqs: 2,
-        code_every_block: false,
-    };
-    let sp = ShapePrior::new(&sp_cfg, &device);
-    let sp_sha = weights::save(&sp, &dir.join("shape_prior.safetensors")).unwrap();
-    let categories: Vec<String> = physnap::data::categories::CATEGORIES
-        .iter()
-        .map(|s| s.to_string())
-        .collect();
-    let dn_cfg = DenoiserConfig {
-        width: 16,
-        layers: 1,
-        head_channels: 16,
-        t_pe_dim: 8,
-        slot_pe_dim: 8,
-        node_head_hidden: vec![16],
-        edge_head_hidden: vec![16],
-        categories: categories.len(),
-        legacy_edge_embedding: false,
-        category_layers: false,
-    };
-    let dn = Denoiser::new(&dn_cfg, &device).unwrap();
-    let dn_sha = weights::save(&dn, &dir.join("denoiser.safetensors")).unwrap();
-    let m = Manifest {
-        shape_prior: Entry {
-            file: "shape_prior.safetensors".into(),
-            sha256: sp_sha,
-            config: sp_cfg,
-        },
-        denoiser: Entry {
-            file: "denoiser.safetensors".into(),
-            sha256: dn_sha,
-            config: dn_cfg,
-        },
-        codebook: None,
-        feature_scales: FeatureScales::default(),
-        categories,
-        data: serde_json::json!({"note": "untrained test weights"}),
-        training: serde_json::Value::Null,
-        metrics: serde_json::Value::Null,
-    };
-    std::fs::write(dir.join("manifest.json"), manifest_to_string(&m)).unwrap();
+    physnap::fixtures::tiny_weights(dir).unwrap();
 }
 
 /// Test knobs.

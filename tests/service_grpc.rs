@@ -223,31 +223,41 @@ async fn submit_watch_get_artifact() {
         tonic_health::pb::health_check_response::ServingStatus::Serving as i32
     );
 
-    // Reflection v1 lists the job service (grpcurl-style discovery).
-    use tonic_reflection::pb::v1 as refl;
-    let mut rc = refl::server_reflection_client::ServerReflectionClient::new(channel_for(&s).await);
-    let req = refl::ServerReflectionRequest {
-        host: String::new(),
-        message_request: Some(
-            refl::server_reflection_request::MessageRequest::ListServices(String::new()),
-        ),
-    };
-    let mut resp = rc
-        .server_reflection_info(tokio_stream::iter(vec![req]))
-        .await
-        .unwrap()
-        .into_inner();
-    let first = resp.next().await.unwrap().unwrap();
-    let Some(refl::server_reflection_response::MessageResponse::ListServicesResponse(list)) =
-        first.message_response
-    else {
-        panic!("unexpected reflection answer: {first:?}");
-    };
-    let names: Vec<String> = list.service.into_iter().map(|s| s.name).collect();
-    assert!(
-        names.contains(&"physnap.v1.JobService".to_string()),
-        "{names:?}"
-    );
+    // Reflection, v1 and v1alpha (grpcurl-style discovery), lists the job service and health.
+    macro_rules! list_services {
+        ($refl:path) => {{
+            use $refl as refl;
+            let mut rc =
+                refl::server_reflection_client::ServerReflectionClient::new(channel_for(&s).await);
+            let req = refl::ServerReflectionRequest {
+                host: String::new(),
+                message_request: Some(
+                    refl::server_reflection_request::MessageRequest::ListServices(String::new()),
+                ),
+            };
+            let mut resp = rc
+                .server_reflection_info(tokio_stream::iter(vec![req]))
+                .await
+                .unwrap()
+                .into_inner();
+            let first = resp.next().await.unwrap().unwrap();
+            let Some(refl::server_reflection_response::MessageResponse::ListServicesResponse(
+                list,
+            )) = first.message_response
+            else {
+                panic!("unexpected reflection answer: {first:?}");
+            };
+            list.service.into_iter().map(|s| s.name).collect::<Vec<String>>()
+        }};
+    }
+    for names in [
+        list_services!(tonic_reflection::pb::v1),
+        list_services!(tonic_reflection::pb::v1alpha),
+    ] {
+        for want in ["physnap.v1.JobService", "grpc.health.v1.Health"] {
+            assert!(names.contains(&want.to_string()), "{want}: {names:?}");
+        }
+    }
     s.shutdown().await;
 }
 
@@ -537,5 +547,56 @@ async fn cameras_w_free_and_repair_reach_the_job_and_its_ranking() {
             e.message()
         );
     }
+    s.shutdown().await;
+}
+
+/// An oversize SubmitJob gets OUT_OF_RANGE with physnap's field/limit/value metadata, and a
+/// resume point beyond the log of a running job still ends the stream with `done`, as SSE.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn oversize_message_metadata_and_resume_ahead_ends_with_done() {
+    let s = start(Opts {
+        max_body_bytes: 1 << 20,
+        ..Opts::default()
+    })
+    .await;
+    let mut cl = JobServiceClient::connect(s.grpc_url())
+        .await
+        .unwrap()
+        .max_encoding_message_size(64 << 20);
+    // 150k points of 3 f32: 1.8 MB, above the 1 MiB limit.
+    let big: Vec<f32> = (0..450_000).map(|i| (i % 97) as f32 * 0.01).collect();
+    let st = refused(&mut cl, spec(big)).await;
+    assert_eq!(st.code(), tonic::Code::OutOfRange, "{st:?}");
+    let md = st.metadata();
+    assert_eq!(md.get("physnap-field").unwrap(), "message");
+    assert_eq!(md.get("physnap-limit").unwrap(), "<= 1048576 bytes");
+    assert!(
+        md.get("physnap-value")
+            .unwrap()
+            .to_str()
+            .unwrap()
+            .ends_with(" bytes"),
+        "{md:?}"
+    );
+    // A long job, watched from far beyond its log while it runs.
+    let mut long = spec(cloud(32).into_iter().flatten().collect());
+    long.sampler = "ddpm".into();
+    long.steps = Some(1000);
+    long.n_g = Some(0);
+    let job = cl
+        .submit_job(pb::SubmitJobRequest {
+            spec: Some(long),
+            request_id: String::new(),
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    let events = watch(&mut cl, &job.id, 1_000_000).await;
+    assert_eq!(
+        events.last().map(|e| e.kind.as_str()),
+        Some("done"),
+        "{:?}",
+        events.iter().map(|e| &e.kind).collect::<Vec<_>>()
+    );
     s.shutdown().await;
 }

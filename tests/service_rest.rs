@@ -523,10 +523,11 @@ async fn bad_inputs_get_problems_and_nothing_is_stored() {
             json!({"points": points_json(20), "wpc": 1}),
         )
         .await,
-        400,
+        422,
     )
     .await;
     assert!(p["detail"].as_str().unwrap().contains("wpc"), "{p}");
+    assert_eq!(p["errors"][0]["field"], "wpc", "{p}");
     let p = problem(
         c.post(s.url("/v1/jobs?seed=3"))
             .header("content-type", "application/x-ply")
@@ -1306,5 +1307,242 @@ async fn a_job_whose_samples_all_diverge_fails_with_the_reason() {
     let detail = j["error"]["detail"].as_str().unwrap();
     assert!(detail.contains("all 2 samples diverged"), "{detail}");
     assert!(j["artifacts"].as_array().unwrap().is_empty(), "{j:#}");
+    s.shutdown().await;
+}
+
+/// An oversize body gets its 413 and `Connection: close`, so a client that pools connections
+/// never sends its next request down a connection the server is closing (the bug an httpx
+/// client hit: 5 of 50 requests after an oversize upload failed).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn oversize_body_closes_cleanly_and_pooled_connections_keep_working() {
+    use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
+    let s = start(Opts {
+        max_body_bytes: 1 << 20,
+        ..Opts::default()
+    })
+    .await;
+    // Raw HTTP/1.1: the whole oversize body is sent (the server drains it), the answer is a 413
+    // problem that says `connection: close`, and the server then closes.
+    let mut tcp = tokio::net::TcpStream::connect(s.addrs.http).await.unwrap();
+    let body = vec![0u8; 3 << 20];
+    let head = format!(
+        "POST /v1/jobs HTTP/1.1\r\nhost: x\r\ncontent-type: application/octet-stream\r\ncontent-length: {}\r\n\r\n",
+        body.len()
+    );
+    tcp.write_all(head.as_bytes()).await.unwrap();
+    tcp.write_all(&body).await.unwrap();
+    let mut answer = Vec::new();
+    tokio::time::timeout(Duration::from_secs(30), tcp.read_to_end(&mut answer))
+        .await
+        .expect("the server closes the connection after the 413")
+        .unwrap();
+    let answer = String::from_utf8_lossy(&answer).to_ascii_lowercase();
+    assert!(answer.starts_with("http/1.1 413"), "{answer}");
+    assert!(answer.contains("\r\nconnection: close\r\n"), "{answer}");
+    assert!(answer.contains("application/problem+json"), "{answer}");
+    // A pooled client (one connection) alternating oversize uploads and small requests.
+    let c = reqwest::Client::builder()
+        .http1_only()
+        .pool_max_idle_per_host(1)
+        .timeout(Duration::from_secs(60))
+        .build()
+        .unwrap();
+    for round in 0..5 {
+        let r = c
+            .post(s.url("/v1/jobs"))
+            .header("content-type", "application/octet-stream")
+            .body(vec![0u8; 2 << 20])
+            .send()
+            .await
+            .unwrap_or_else(|e| panic!("round {round}: oversize upload: {e}"));
+        assert_eq!(r.headers()["connection"], "close");
+        problem(r, 413).await;
+        for i in 0..10 {
+            let r = c
+                .get(s.url("/v1/jobs"))
+                .send()
+                .await
+                .unwrap_or_else(|e| panic!("round {round}, request {i} after the 413: {e}"));
+            assert_eq!(r.status(), 200);
+        }
+    }
+    s.shutdown().await;
+}
+
+/// The places where the OpenAPI document and the server once disagreed.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_server_accepts_and_refuses_what_the_document_says() {
+    let s = start(Opts {
+        tokens: "lab:secret-token-1".into(),
+        ..Opts::default()
+    })
+    .await;
+    let c = client();
+    let auth = |r: reqwest::RequestBuilder| r.bearer_auth("secret-token-1");
+    // The one public operation.
+    let r = c.get(s.url("/v1/categories")).send().await.unwrap();
+    assert_eq!(r.status(), 200);
+    problem(c.get(s.url("/v1/jobs")).send().await.unwrap(), 401).await;
+    // An integral float is an integer (JSON Schema's reading), in the body and the query.
+    let r = auth(c.post(s.url("/v1/jobs")))
+        .json(
+            &json!({"points": points_json(20), "seed": 2567.0, "steps": 4.0,
+                      "resolution": 8, "w_pc": 0.0, "w_pen": 0.0, "w_mob": 0.0}),
+        )
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    let job: Value = r.json().await.unwrap();
+    assert_eq!(job["request"]["seed"], 2567);
+    let id = job["id"].as_str().unwrap().to_string();
+    let ply = physnap::pointcloud::PointCloud { points: cloud(20) }
+        .to_bytes(physnap::pointcloud::Format::Ply);
+    let r = auth(c.post(s.url("/v1/jobs?seed=7.0&steps=4&resolution=8.0")))
+        .header("content-type", "application/x-ply")
+        .body(ply)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    // Type errors are field violations like any other: a fraction, a negative, a value past
+    // the type, in the body and in the query.
+    let p = problem(
+        auth(c.post(s.url("/v1/jobs")))
+            .json(&json!({"points": points_json(20), "seed": 2567.5}))
+            .send()
+            .await
+            .unwrap(),
+        422,
+    )
+    .await;
+    assert_eq!(p["errors"][0]["field"], "seed", "{p}");
+    assert!(
+        p["errors"][0]["value"].as_str().unwrap().contains("2567.5"),
+        "{p}"
+    );
+    for (query, field) in [
+        ("steps=-1", "steps"),
+        ("steps=1000000000000", "steps"),
+        ("seed=18446744073709551616", "seed"),
+    ] {
+        let ply = physnap::pointcloud::PointCloud { points: cloud(20) }
+            .to_bytes(physnap::pointcloud::Format::Ply);
+        let p = problem(
+            auth(c.post(s.url(&format!("/v1/jobs?{query}"))))
+                .header("content-type", "application/x-ply")
+                .body(ply)
+                .send()
+                .await
+                .unwrap(),
+            422,
+        )
+        .await;
+        assert_eq!(p["errors"][0]["field"], field, "{query}: {p}");
+        assert!(!p["errors"][0]["limit"].as_str().unwrap().is_empty(), "{p}");
+    }
+    // Paging: page_size outside 1..=500 is refused with the field listed; any well-formed
+    // cursor is a page.
+    for bad in ["0", "501"] {
+        let p = problem(
+            auth(c.get(s.url(&format!("/v1/jobs?page_size={bad}"))))
+                .send()
+                .await
+                .unwrap(),
+            422,
+        )
+        .await;
+        assert_eq!(p["errors"][0]["field"], "page_size", "{p}");
+        assert_eq!(p["errors"][0]["value"], bad, "{p}");
+    }
+    let cursor = base64::engine::general_purpose::URL_SAFE_NO_PAD.encode("after:zzz");
+    let r = auth(c.get(s.url(&format!("/v1/jobs?page_size=2&page_token={cursor}"))))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    let page: Value = r.json().await.unwrap();
+    assert!(page["jobs"].as_array().unwrap().is_empty(), "{page}");
+    // Last-Event-ID must be a sequence number.
+    let p = problem(
+        auth(c.get(s.url(&format!("/v1/jobs/{id}/events"))))
+            .header("last-event-id", "null")
+            .send()
+            .await
+            .unwrap(),
+        422,
+    )
+    .await;
+    assert_eq!(p["errors"][0]["field"], "Last-Event-ID", "{p}");
+    // The artefact-name 404 and the unknown-route 404 do not echo the request.
+    for path in [
+        format!("/v1/jobs/{id}/artifacts/..%2F..%2Fetc%2Fpasswd-probe"),
+        "/v1/nothing-here-probe".to_string(),
+    ] {
+        let p = problem(auth(c.get(s.url(&path))).send().await.unwrap(), 404).await;
+        assert!(!p.to_string().contains("probe"), "{path}: {p}");
+    }
+    s.shutdown().await;
+}
+
+/// Cancel is idempotent: a CANCELLED job answers 200 again; a finished one answers 409.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn cancel_twice_is_200_and_cancel_after_success_is_409() {
+    let s = start(Opts {
+        max_running_jobs: 1,
+        ..Opts::default()
+    })
+    .await;
+    let c = client();
+    // A long job keeps the worker busy, so the second one is still queued when cancelled.
+    let long = submit(
+        &c,
+        &s.url("/v1/jobs"),
+        json!({"points": points_json(20), "steps": 1000, "sampler": "ddpm", "resolution": 8,
+               "w_pc": 0.0, "w_pen": 0.0, "w_mob": 0.0}),
+    )
+    .await;
+    assert_eq!(long.status(), 202);
+    let long = long.headers()["location"].to_str().unwrap().to_string();
+    let queued = submit(
+        &c,
+        &s.url("/v1/jobs"),
+        json!({"points": points_json(20), "steps": 4, "resolution": 8}),
+    )
+    .await;
+    let queued = queued.headers()["location"].to_str().unwrap().to_string();
+    for _ in 0..2 {
+        let r = c
+            .post(s.url(&format!("{queued}/cancel")))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 200);
+        assert_eq!(r.json::<Value>().await.unwrap()["state"], "CANCELLED");
+    }
+    let r = c
+        .post(s.url(&format!("{long}/cancel")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    wait_state(&c, &s.url(&long), &["CANCELLED"]).await;
+    let done = submit(
+        &c,
+        &s.url("/v1/jobs"),
+        json!({"points": points_json(20), "steps": 2, "resolution": 8,
+               "w_pc": 0.0, "w_pen": 0.0, "w_mob": 0.0}),
+    )
+    .await;
+    let done = done.headers()["location"].to_str().unwrap().to_string();
+    wait_state(&c, &s.url(&done), &["SUCCEEDED"]).await;
+    problem(
+        c.post(s.url(&format!("{done}/cancel")))
+            .send()
+            .await
+            .unwrap(),
+        409,
+    )
+    .await;
     s.shutdown().await;
 }

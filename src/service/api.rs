@@ -53,7 +53,11 @@ pub struct JobRequest {
     pub w_mob: Option<f64>,
     /// n_g: how many of the final reverse steps are guided (<= steps). Default: the paper's 500
     /// of 1000, scaled to `steps` (e.g. 10 of 20).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "integral::opt_u32"
+    )]
     pub n_g: Option<u32>,
     /// τ: temperature of the soft point-to-part correspondence in ℓ_pc (finite, > 0; default
     /// 1000).
@@ -67,11 +71,19 @@ pub struct JobRequest {
     /// Refinement steps after sampling (physnap, not in the paper): small clamped gradient
     /// steps on the guidance loss of the finished sample (0-1000; default 30; 0 = off, the
     /// paper).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "integral::opt_u32"
+    )]
     pub refine_steps: Option<u32>,
     /// Physics-only refinement steps after the refinement steps: ℓ_pen and ℓ_mob alone, part
     /// boxes only (0-1000; default 0 = off). They run only when `w_pen` or `w_mob` is > 0.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "integral::opt_u32"
+    )]
     pub refine_physics_steps: Option<u32>,
     /// Sampler: `ddim` (default) or `ddpm` (NAP's; strided ancestral with fewer steps). The
     /// paper's sampler is `ddpm` with 1000 steps.
@@ -81,22 +93,42 @@ pub struct JobRequest {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub eta: Option<f64>,
     /// Reverse steps, 1–1000 (default 200; 1000 is the full schedule).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "integral::opt_u32"
+    )]
     pub steps: Option<u32>,
     /// Seed of sample 0; absent = random, echoed in `request.seed`.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "integral::opt_u64"
+    )]
     pub seed: Option<u64>,
     /// Best-of-N samples (1–16).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "integral::opt_u32"
+    )]
     pub samples: Option<u32>,
     /// Seconds from submission until the job fails with `deadline-exceeded`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub deadline_seconds: Option<f64>,
     /// Attach an x̂₀ preview to every this many steps' progress (0 = never).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "integral::opt_u32"
+    )]
     pub preview_every: Option<u32>,
     /// Marching-cubes resolution (8–128, default 32).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "integral::opt_u32"
+    )]
     pub resolution: Option<u32>,
     /// Replace part shapes by their nearest training code of the weights' codebook: `auto`
     /// (default: `empty` when the weights have a codebook, else `off`), `off`, `empty` (shapes
@@ -115,7 +147,11 @@ pub struct JobRequest {
     /// guidance (all weights 0): above t = 500 the guidance bought no category accuracy there,
     /// only larger objects with more parts, and those steps take one denoiser forward instead
     /// of two.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "integral::opt_u32"
+    )]
     pub category_guidance_below: Option<u32>,
     /// Joint motions of the result: `screw` (NAP: each joint keeps its rotation and
     /// translation ranges; URDF screws need a helper link) or `dominant` (each joint keeps only
@@ -226,36 +262,45 @@ pub struct UploadParams {
     /// Mobility loss weight.
     pub w_mob: Option<f64>,
     /// Guided final reverse steps (n_g).
+    #[serde(default, deserialize_with = "integral::opt_u32")]
     pub n_g: Option<u32>,
     /// Temperature τ of ℓ_pc.
     pub tau: Option<f64>,
     /// Guidance-gradient clamp.
     pub guidance_max_step: Option<f64>,
     /// Refinement steps after sampling.
+    #[serde(default, deserialize_with = "integral::opt_u32")]
     pub refine_steps: Option<u32>,
     /// Physics-only refinement steps after the refinement steps.
+    #[serde(default, deserialize_with = "integral::opt_u32")]
     pub refine_physics_steps: Option<u32>,
     /// Sampler (`ddpm` or `ddim`).
     pub sampler: Option<String>,
     /// DDIM η.
     pub eta: Option<f64>,
     /// Reverse steps.
+    #[serde(default, deserialize_with = "integral::opt_u32")]
     pub steps: Option<u32>,
     /// Seed.
+    #[serde(default, deserialize_with = "integral::opt_u64")]
     pub seed: Option<u64>,
     /// Best-of-N.
+    #[serde(default, deserialize_with = "integral::opt_u32")]
     pub samples: Option<u32>,
     /// Deadline (s).
     pub deadline_seconds: Option<f64>,
     /// Preview period.
+    #[serde(default, deserialize_with = "integral::opt_u32")]
     pub preview_every: Option<u32>,
     /// Meshing resolution.
+    #[serde(default, deserialize_with = "integral::opt_u32")]
     pub resolution: Option<u32>,
     /// Codebook retrieval (`auto`, `off`, `empty`, `all`, `category`).
     pub retrieval: Option<String>,
     /// Classifier-free category guidance w.
     pub category_guidance: Option<f64>,
     /// Category guidance only at diffusion time t below this (1-1000).
+    #[serde(default, deserialize_with = "integral::opt_u32")]
     pub category_guidance_below: Option<u32>,
     /// Joint motions (`screw`, `dominant`).
     pub joint_motion: Option<String>,
@@ -823,5 +868,80 @@ pub fn job_view(r: &JobRecord, progress: Option<&Progress>, cancel_requested: bo
             .iter()
             .map(|a| artifact_view(&r.id, a))
             .collect(),
+    }
+}
+
+/// Integer fields as JSON Schema reads them: an integer is any number with no fractional part,
+/// so `2567.0` is the integer 2567 (and a query string's `"2567.0"` too). Fractions, negatives
+/// and values beyond the type are refused with serde's usual type error.
+pub(crate) mod integral {
+    use serde::de::{self, Deserializer, Visitor};
+    use std::fmt;
+    use std::marker::PhantomData;
+
+    /// Largest float that still holds every integer exactly (2^53).
+    const EXACT: f64 = 9_007_199_254_740_992.0;
+
+    struct V<T>(PhantomData<T>);
+
+    impl<'de, T: TryFrom<u64>> Visitor<'de> for V<T> {
+        type Value = Option<T>;
+        fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+            write!(f, "a non-negative integer no larger than {}", max::<T>())
+        }
+        fn visit_none<E: de::Error>(self) -> Result<Self::Value, E> {
+            Ok(None)
+        }
+        fn visit_unit<E: de::Error>(self) -> Result<Self::Value, E> {
+            Ok(None)
+        }
+        fn visit_some<D: Deserializer<'de>>(self, d: D) -> Result<Self::Value, D::Error> {
+            d.deserialize_any(self)
+        }
+        fn visit_u64<E: de::Error>(self, v: u64) -> Result<Self::Value, E> {
+            T::try_from(v)
+                .map(Some)
+                .map_err(|_| E::invalid_value(de::Unexpected::Unsigned(v), &self))
+        }
+        fn visit_i64<E: de::Error>(self, v: i64) -> Result<Self::Value, E> {
+            u64::try_from(v)
+                .map_err(|_| E::invalid_value(de::Unexpected::Signed(v), &self))
+                .and_then(|u| self.visit_u64(u))
+        }
+        fn visit_f64<E: de::Error>(self, v: f64) -> Result<Self::Value, E> {
+            if v.fract() == 0.0 && (0.0..=EXACT).contains(&v) {
+                self.visit_u64(v as u64)
+            } else {
+                Err(E::invalid_value(de::Unexpected::Float(v), &self))
+            }
+        }
+        fn visit_str<E: de::Error>(self, v: &str) -> Result<Self::Value, E> {
+            if let Ok(u) = v.parse::<u64>() {
+                return self.visit_u64(u);
+            }
+            match v.parse::<f64>() {
+                Ok(f) if f.is_finite() => self.visit_f64(f),
+                _ => Err(E::invalid_value(de::Unexpected::Str(v), &self)),
+            }
+        }
+    }
+
+    fn max<T: TryFrom<u64>>() -> u64 {
+        // The largest u64 that fits T (u32 or u64 here).
+        if T::try_from(u64::MAX).is_ok() {
+            u64::MAX
+        } else {
+            u32::MAX as u64
+        }
+    }
+
+    /// `Option<u32>` from an integer, an integral float or a string of either.
+    pub fn opt_u32<'de, D: Deserializer<'de>>(d: D) -> Result<Option<u32>, D::Error> {
+        d.deserialize_option(V::<u32>(PhantomData))
+    }
+
+    /// `Option<u64>` from an integer, an integral float or a string of either.
+    pub fn opt_u64<'de, D: Deserializer<'de>>(d: D) -> Result<Option<u64>, D::Error> {
+        d.deserialize_option(V::<u64>(PhantomData))
     }
 }

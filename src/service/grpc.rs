@@ -43,7 +43,14 @@ pub struct GrpcJobs {
     pub svc: Arc<Service>,
     /// Token table.
     pub tenants: Arc<Tenants>,
+    /// Largest `SubmitJob` message (the REST body limit). tonic itself refuses only messages
+    /// past [`DECODE_LIMIT_FACTOR`] times this, so oversize submissions up to there are
+    /// answered with physnap's metadata.
+    pub max_message_bytes: usize,
 }
+
+/// tonic's own decoding limit, as a multiple of [`GrpcJobs::max_message_bytes`].
+pub const DECODE_LIMIT_FACTOR: usize = 4;
 
 /// gRPC status of a service error.
 pub fn status_of(e: ServiceError) -> Status {
@@ -54,7 +61,7 @@ pub fn status_of(e: ServiceError) -> Status {
         | ServiceError::UnsupportedMediaType { .. } => Status::invalid_argument(msg),
         ServiceError::QueueFull { .. } => Status::resource_exhausted(msg),
         ServiceError::ShuttingDown { .. } => Status::unavailable(msg),
-        ServiceError::NotFound(_) => Status::not_found(msg),
+        ServiceError::NotFound(_) | ServiceError::NoRoute => Status::not_found(msg),
         ServiceError::Conflict { .. } => Status::failed_precondition(msg),
         ServiceError::IdempotencyReused { .. } => Status::already_exists(msg),
         ServiceError::Unauthenticated(_) => Status::unauthenticated(msg),
@@ -78,6 +85,12 @@ pub fn status_of(e: ServiceError) -> Status {
                 if let Ok(m) = MetadataValue::try_from(val.as_str()) {
                     md.insert(k, m);
                 }
+            }
+        }
+        ServiceError::TooLarge { limit } => {
+            md.insert("physnap-field", MetadataValue::from_static("message"));
+            if let Ok(m) = MetadataValue::try_from(format!("<= {limit} bytes")) {
+                md.insert("physnap-limit", m);
             }
         }
         ServiceError::QueueFull { retry_after, .. }
@@ -186,6 +199,16 @@ impl JobService for GrpcJobs {
     ) -> Result<Response<pb::Job>, Status> {
         let tenant = self.tenant(&req)?;
         let r = req.into_inner();
+        let size = prost::Message::encoded_len(&r);
+        if size > self.max_message_bytes {
+            let mut s = status_of(ServiceError::TooLarge {
+                limit: self.max_message_bytes,
+            });
+            if let Ok(v) = MetadataValue::try_from(format!("{size} bytes")) {
+                s.metadata_mut().insert("physnap-value", v);
+            }
+            return Err(s);
+        }
         let spec = r
             .spec
             .ok_or_else(|| Status::invalid_argument("invalid spec: missing (must be present)"))?;
@@ -217,11 +240,8 @@ impl JobService for GrpcJobs {
     ) -> Result<Response<pb::ListJobsResponse>, Status> {
         let tenant = self.tenant(&req)?;
         let r = req.into_inner();
-        let size = if r.page_size == 0 {
-            50
-        } else {
-            r.page_size as usize
-        };
+        // 0 = the default, as proto3 cannot tell unset from 0.
+        let size = if r.page_size == 0 { 50 } else { r.page_size };
         let page = self
             .svc
             .list(&tenant, size, Some(r.page_token.as_str()))

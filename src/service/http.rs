@@ -4,8 +4,8 @@
 //! Why it exists: it maps HTTP onto [`Service`] and nothing more: bodies become a
 //! [`JobInput`](super::spec::JobInput), [`ServiceError`]s become RFC 9457 problem+json once (in
 //! [`IntoResponse`]), and SSE frames are built from the service's watch items. The OpenAPI
-//! document is generated from the annotations here ([`ApiDoc`]); `tests/openapi.rs` fails when
-//! the committed `openapi.yaml` drifts.
+//! document is generated from the annotations here ([`ApiDoc`]) and made exact by
+//! [`super::openapi`]; `tests/openapi.rs` fails when the committed `openapi.yaml` drifts.
 
 use std::convert::Infallible;
 use std::sync::Arc;
@@ -13,7 +13,6 @@ use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 use axum::body::Bytes;
-use axum::extract::rejection::BytesRejection;
 use axum::extract::{DefaultBodyLimit, Path, Query, RawQuery, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, Uri, header};
 use axum::response::sse::{Event, KeepAlive, Sse};
@@ -66,7 +65,7 @@ pub fn status_of(e: &ServiceError) -> StatusCode {
         }
         ServiceError::QueueFull { .. } => StatusCode::TOO_MANY_REQUESTS,
         ServiceError::ShuttingDown { .. } => StatusCode::SERVICE_UNAVAILABLE,
-        ServiceError::NotFound(_) => StatusCode::NOT_FOUND,
+        ServiceError::NotFound(_) | ServiceError::NoRoute => StatusCode::NOT_FOUND,
         ServiceError::Conflict { .. } => StatusCode::CONFLICT,
         ServiceError::Unauthenticated(_) => StatusCode::UNAUTHORIZED,
         ServiceError::Malformed(_) => StatusCode::BAD_REQUEST,
@@ -135,6 +134,12 @@ impl IntoResponse for ApiError {
             r.headers_mut()
                 .insert(header::RETRY_AFTER, HeaderValue::from(s));
         }
+        if p.status == 413 {
+            // The request's body may not have been read to the end: the connection cannot be
+            // reused, and the client must know it.
+            r.headers_mut()
+                .insert(header::CONNECTION, HeaderValue::from_static("close"));
+        }
         if p.status == 401 {
             r.headers_mut()
                 .insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
@@ -169,14 +174,14 @@ fn at(uri: &Uri) -> impl Fn(ServiceError) -> ApiError + '_ {
         (Vec<u8> = "application/x-ply"),
         (Vec<u8> = "application/x-npy"),
         (Vec<u8> = "application/octet-stream")
-    ), description = "A JSON job request, or a raw point-cloud upload (PLY, NPY, or little-endian f32 triples) with the knobs as query parameters"),
+    ), description = "A JSON job request, or a raw point-cloud upload (PLY, NPY, or little-endian f32 triples) with the knobs as query parameters (which a JSON body must not carry: 422)"),
     responses(
         (status = 202, description = "Accepted; `Location` names the job", body = JobView),
-        (status = 400, description = "Malformed body", body = Problem, content_type = "application/problem+json"),
+        (status = 400, description = "A body or query string that does not parse (not JSON, broken encoding)", body = Problem, content_type = "application/problem+json"),
         (status = 401, description = "Missing or unknown bearer token", body = Problem, content_type = "application/problem+json"),
         (status = 413, description = "Body too large", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Unsupported content type", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "A field broke a limit (field, limit and value named), or the Idempotency-Key was reused with another body", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "A field broke a limit or has the wrong type (each listed in `errors` with field, limit and value), query parameters came with a JSON body, or the Idempotency-Key was reused with another body", body = Problem, content_type = "application/problem+json"),
         (status = 429, description = "Queue full; see Retry-After", body = Problem, content_type = "application/problem+json"),
         (status = 503, description = "Shutting down; see Retry-After", body = Problem, content_type = "application/problem+json"),
     )
@@ -186,19 +191,13 @@ async fn submit(
     uri: Uri,
     headers: HeaderMap,
     RawQuery(query): RawQuery,
-    body: Result<Bytes, BytesRejection>,
+    body: axum::body::Body,
 ) -> ApiResult<Response> {
     let err = at(&uri);
     let tenant = tenant(&st, &headers).map_err(&err)?;
-    let body = body.map_err(|r| {
-        err(if r.status() == StatusCode::PAYLOAD_TOO_LARGE {
-            ServiceError::TooLarge {
-                limit: st.max_body_bytes,
-            }
-        } else {
-            ServiceError::Malformed(r.body_text())
-        })
-    })?;
+    let body = read_body(body, &headers, st.max_body_bytes)
+        .await
+        .map_err(&err)?;
     let ctype = headers
         .get(header::CONTENT_TYPE)
         .and_then(|v| v.to_str().ok())
@@ -248,6 +247,55 @@ async fn submit(
         .into_response())
 }
 
+/// Most bytes of an oversize body read and thrown away before the 413, so that a client still
+/// sending it reads the answer instead of a reset. A larger body (by its Content-Length or as
+/// it arrives) is answered at once; the 413 carries `Connection: close` either way, so no
+/// client reuses a connection whose request was not read to the end.
+const DRAIN_BYTES: usize = 64 << 20;
+
+/// How long the drain of an oversize body may take.
+const DRAIN_TIME: Duration = Duration::from_secs(15);
+
+/// Read a submission body of at most `limit` bytes; see [`DRAIN_BYTES`] for the rest.
+async fn read_body(
+    body: axum::body::Body,
+    headers: &HeaderMap,
+    limit: usize,
+) -> Result<Bytes, ServiceError> {
+    let too_large = ServiceError::TooLarge { limit };
+    let declared = headers
+        .get(header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.parse::<u64>().ok());
+    if declared.is_some_and(|n| n > (limit + DRAIN_BYTES) as u64) {
+        return Err(too_large);
+    }
+    let mut stream = body.into_data_stream();
+    let mut buf = Vec::with_capacity(declared.map_or(0, |n| (n as usize).min(limit)));
+    let mut total = 0usize;
+    while let Some(chunk) = stream.next().await {
+        let chunk = chunk.map_err(|e| ServiceError::Malformed(format!("reading the body: {e}")))?;
+        total += chunk.len();
+        if total > limit {
+            break;
+        }
+        buf.extend_from_slice(&chunk);
+    }
+    if total <= limit {
+        return Ok(Bytes::from(buf));
+    }
+    let drain = async {
+        while let Some(Ok(chunk)) = stream.next().await {
+            total += chunk.len();
+            if total > limit + DRAIN_BYTES {
+                break;
+            }
+        }
+    };
+    let _ = tokio::time::timeout(DRAIN_TIME, drain).await;
+    Err(too_large)
+}
+
 /// A submission body (JSON request, or a raw PLY / NPY / f32le upload with the knobs in the
 /// query string) as the domain input.
 fn parse_body(ctype: &str, query: Option<&str>, body: &[u8]) -> Result<JobInput, ServiceError> {
@@ -256,9 +304,31 @@ fn parse_body(ctype: &str, query: Option<&str>, body: &[u8]) -> Result<JobInput,
     };
     match ctype {
         "application/json" => {
+            // The query string carries the knobs of raw uploads only; with a JSON body they
+            // would be silently lost, so they are refused.
+            if let Some(name) = query
+                .unwrap_or("")
+                .split('&')
+                .find(|p| !p.is_empty())
+                .map(|p| p.split('=').next().unwrap_or(p))
+            {
+                return Err(ServiceError::Invalid(super::spec::Violation {
+                    field: name.chars().take(64).collect(),
+                    limit: "absent with a JSON body (query parameters are for raw uploads; put the field in the body)".into(),
+                    value: "given in the query string".into(),
+                }));
+            }
             let de = &mut serde_json::Deserializer::from_slice(body);
-            let req: JobRequest = serde_path_to_error::deserialize(de)
-                .map_err(|e| ServiceError::Malformed(e.to_string()))?;
+            let req: JobRequest = serde_path_to_error::deserialize(de).map_err(|e| {
+                if e.inner().classify() == serde_json::error::Category::Data {
+                    let msg = e.inner().to_string();
+                    // serde_json appends " at line L column C" to data errors.
+                    let msg = msg.split(" at line ").next().unwrap_or(&msg);
+                    ServiceError::Invalid(type_violation(&e.path().to_string(), msg))
+                } else {
+                    ServiceError::Malformed(e.to_string())
+                }
+            })?;
             Ok(req.into_input()?)
         }
         "application/x-ply" | "application/ply" | "model/x-ply" => {
@@ -273,6 +343,49 @@ fn parse_body(ctype: &str, query: Option<&str>, body: &[u8]) -> Result<JobInput,
     }
 }
 
+/// A value of the wrong type (or out of its type's range) as a field violation:
+/// serde's "invalid value: integer `-1`, expected u32" becomes field, limit `u32`, value
+/// `integer -1`.
+fn type_violation(field: &str, msg: &str) -> super::spec::Violation {
+    let (value, limit) = msg
+        .split_once(", expected ")
+        .unwrap_or((msg, "the documented type"));
+    let value = value
+        .strip_prefix("invalid type: ")
+        .or_else(|| value.strip_prefix("invalid value: "))
+        .unwrap_or(value)
+        .replace('`', "");
+    super::spec::Violation {
+        field: if field.is_empty() || field == "." {
+            "body".into()
+        } else {
+            field.to_string()
+        },
+        limit: limit.to_string(),
+        value,
+    }
+}
+
+/// A query string that does not parse into its parameters: a field of the wrong type is a
+/// field violation (422, listed in `errors`); anything else is malformed (400).
+fn query_error(e: axum::extract::rejection::QueryRejection) -> ServiceError {
+    let text = e.body_text();
+    let msg = text
+        .strip_prefix("Failed to deserialize query string: ")
+        .unwrap_or(&text);
+    match msg.split_once(": ") {
+        Some((field, detail))
+            if !field.is_empty()
+                && field
+                    .chars()
+                    .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-') =>
+        {
+            ServiceError::Invalid(type_violation(field, detail))
+        }
+        _ => ServiceError::Malformed(text),
+    }
+}
+
 fn query_parse<T: serde::de::DeserializeOwned>(q: &str) -> Result<T, ServiceError> {
     // axum's Query extractor uses serde_urlencoded; going through `Query::try_from_uri` keeps
     // the same parser without a direct dependency.
@@ -281,7 +394,7 @@ fn query_parse<T: serde::de::DeserializeOwned>(q: &str) -> Result<T, ServiceErro
         .map_err(|e| ServiceError::Malformed(format!("query string: {e}")))?;
     Query::<T>::try_from_uri(&uri)
         .map(|q| q.0)
-        .map_err(|e| ServiceError::Malformed(e.body_text()))
+        .map_err(query_error)
 }
 
 /// The knobs of a raw upload. `camera` may repeat, which serde_urlencoded does not take into a
@@ -308,6 +421,7 @@ fn upload_params(q: &str) -> Result<UploadParams, ServiceError> {
     params(("id" = String, Path, description = "Job id")),
     responses(
         (status = 200, body = JobView),
+        (status = 401, description = "Missing or unknown bearer token", body = Problem, content_type = "application/problem+json"),
         (status = 404, description = "No such job for this tenant", body = Problem, content_type = "application/problem+json"),
     )
 )]
@@ -322,12 +436,16 @@ async fn get_job(
     Ok(Json(st.svc.get(&tenant, &id).await.map_err(&err)?))
 }
 
+/// Jobs per page when `page_size` is not given.
+const DEFAULT_PAGE_SIZE: u32 = 50;
+
 /// Paging parameters.
 #[derive(Debug, Deserialize, utoipa::IntoParams)]
 #[into_params(parameter_in = Query)]
 struct ListParams {
     /// Jobs per page (1–500, default 50).
-    page_size: Option<usize>,
+    #[serde(default, deserialize_with = "super::api::integral::opt_u32")]
+    page_size: Option<u32>,
     /// `next_page_token` of the previous page.
     page_token: Option<String>,
 }
@@ -336,7 +454,12 @@ struct ListParams {
 #[utoipa::path(
     get, path = "/v1/jobs", tag = "jobs",
     params(ListParams),
-    responses((status = 200, body = JobList))
+    responses(
+        (status = 200, body = JobList),
+        (status = 400, description = "A query string that does not parse", body = Problem, content_type = "application/problem+json"),
+        (status = 401, description = "Missing or unknown bearer token", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "page_size out of range or not an integer, or a page_token that is not one (listed in `errors`)", body = Problem, content_type = "application/problem+json"),
+    )
 )]
 async fn list_jobs(
     State(st): State<HttpState>,
@@ -346,23 +469,29 @@ async fn list_jobs(
 ) -> ApiResult<Json<JobList>> {
     let err = at(&uri);
     let tenant = tenant(&st, &headers).map_err(&err)?;
-    let Query(q) = q.map_err(|e| err(ServiceError::Malformed(e.body_text())))?;
+    let Query(q) = q.map_err(|e| err(query_error(e)))?;
     Ok(Json(
         st.svc
-            .list(&tenant, q.page_size.unwrap_or(50), q.page_token.as_deref())
+            .list(
+                &tenant,
+                q.page_size.unwrap_or(DEFAULT_PAGE_SIZE),
+                q.page_token.as_deref(),
+            )
             .await
             .map_err(&err)?,
     ))
 }
 
-/// Cancel a job (queued: at once; running: at the next diffusion step).
+/// Cancel a job (queued: at once; running: at the next diffusion step). Idempotent: cancelling a
+/// CANCELLED job answers 200 with the job; a SUCCEEDED or FAILED one answers 409.
 #[utoipa::path(
     post, path = "/v1/jobs/{id}/cancel", tag = "jobs",
     params(("id" = String, Path, description = "Job id")),
     responses(
-        (status = 200, description = "The job (CANCELLED, or RUNNING with cancel_requested)", body = JobView),
-        (status = 404, body = Problem, content_type = "application/problem+json"),
-        (status = 409, description = "Already finished", body = Problem, content_type = "application/problem+json"),
+        (status = 200, description = "The job: CANCELLED (at once when it was queued; also when it was already CANCELLED, so a retried cancel succeeds), or RUNNING with cancel_requested", body = JobView),
+        (status = 401, description = "Missing or unknown bearer token", body = Problem, content_type = "application/problem+json"),
+        (status = 404, description = "No such job for this tenant", body = Problem, content_type = "application/problem+json"),
+        (status = 409, description = "Already SUCCEEDED or FAILED", body = Problem, content_type = "application/problem+json"),
     )
 )]
 async fn cancel_job(
@@ -382,7 +511,8 @@ async fn cancel_job(
     params(("id" = String, Path, description = "Job id")),
     responses(
         (status = 204, description = "Deleted"),
-        (status = 404, body = Problem, content_type = "application/problem+json"),
+        (status = 401, description = "Missing or unknown bearer token", body = Problem, content_type = "application/problem+json"),
+        (status = 404, description = "No such job for this tenant", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "Not finished", body = Problem, content_type = "application/problem+json"),
     )
 )]
@@ -403,6 +533,7 @@ async fn delete_job(
 #[into_params(parameter_in = Query)]
 struct EventsParams {
     /// Replay events after this sequence (the `Last-Event-ID` header wins when both are given).
+    #[serde(default, deserialize_with = "super::api::integral::opt_u64")]
     after: Option<u64>,
 }
 
@@ -414,13 +545,16 @@ struct EventsParams {
     get, path = "/v1/jobs/{id}/events", tag = "jobs",
     params(
         ("id" = String, Path, description = "Job id"),
-        ("Last-Event-ID" = Option<u64>, Header, description = "Resume after this sequence"),
+        ("Last-Event-ID" = Option<u64>, Header, nullable = false, description = "Resume after this sequence (a non-negative integer)"),
         EventsParams
     ),
     responses(
         (status = 200, description = "text/event-stream", content_type = "text/event-stream", body = String),
         (status = 204, description = "The client has already seen the terminal event"),
-        (status = 404, body = Problem, content_type = "application/problem+json"),
+        (status = 400, description = "A query string that does not parse", body = Problem, content_type = "application/problem+json"),
+        (status = 401, description = "Missing or unknown bearer token", body = Problem, content_type = "application/problem+json"),
+        (status = 404, description = "No such job for this tenant", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Last-Event-ID or after is not a sequence number (listed in `errors`)", body = Problem, content_type = "application/problem+json"),
     )
 )]
 async fn events(
@@ -432,7 +566,7 @@ async fn events(
 ) -> ApiResult<Response> {
     let err = at(&uri);
     let tenant = tenant(&st, &headers).map_err(&err)?;
-    let Query(q) = q.map_err(|e| err(ServiceError::Malformed(e.body_text())))?;
+    let Query(q) = q.map_err(|e| err(query_error(e)))?;
     let after = match headers.get("last-event-id") {
         Some(v) => v
             .to_str()
@@ -486,6 +620,8 @@ async fn events(
     params(("id" = String, Path, description = "Job id")),
     responses(
         (status = 200, body = Vec<ArtifactView>),
+        (status = 401, description = "Missing or unknown bearer token", body = Problem, content_type = "application/problem+json"),
+        (status = 404, description = "No such job for this tenant", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "Not finished", body = Problem, content_type = "application/problem+json"),
     )
 )]
@@ -521,7 +657,9 @@ async fn list_artifacts(
     ),
     responses(
         (status = 200, description = "The file; ETag is its sha256", body = Vec<u8>, content_type = "application/octet-stream"),
-        (status = 404, body = Problem, content_type = "application/problem+json"),
+        (status = 304, description = "If-None-Match matched the ETag"),
+        (status = 401, description = "Missing or unknown bearer token", body = Problem, content_type = "application/problem+json"),
+        (status = 404, description = "No such job for this tenant, or no artefact of that name", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "Not finished", body = Problem, content_type = "application/problem+json"),
     )
 )]
@@ -534,9 +672,15 @@ async fn get_artifact(
     let err = at(&uri);
     let tenant = tenant(&st, &headers).map_err(&err)?;
     if !ARTIFACT_NAMES.contains(&name.as_str()) {
-        return Err(err(ServiceError::NotFound(format!(
-            "{id}/artifacts/{name}"
-        ))));
+        // Neither the detail nor the instance echoes the name: it is arbitrary client input
+        // (path-traversal probes).
+        return Err(ApiError(
+            ServiceError::NotFound(format!(
+                "{id} artefact of that name; artefacts are named {}",
+                ARTIFACT_NAMES.join(", ")
+            )),
+            Some(format!("/v1/jobs/{id}/artifacts")),
+        ));
     }
     let (path, a) = st.svc.artifact(&tenant, &id, &name).await.map_err(&err)?;
     let etag = format!("\"{}\"", a.sha256);
@@ -573,11 +717,9 @@ async fn categories(State(st): State<HttpState>) -> Json<Vec<String>> {
     Json(st.svc.caps().categories.clone())
 }
 
-async fn not_found(uri: Uri) -> ApiError {
-    ApiError(
-        ServiceError::NotFound(uri.path().to_string()),
-        Some(uri.path().to_string()),
-    )
+/// Unknown routes: the path is not echoed (arbitrary client input).
+async fn not_found() -> ApiError {
+    ApiError(ServiceError::NoRoute, None)
 }
 
 /// The OpenAPI document of the REST API.
@@ -608,13 +750,9 @@ impl utoipa::Modify for Security {
     }
 }
 
-/// The OpenAPI document as committed in `openapi.yaml` (JSON is valid YAML 1.2).
+/// The OpenAPI document as committed in `openapi.yaml` ([`super::openapi::document`]).
 pub fn openapi_document() -> String {
-    let mut s = ApiDoc::openapi()
-        .to_pretty_json()
-        .unwrap_or_else(|e| format!("# failed to render: {e}"));
-    s.push('\n');
-    s
+    super::openapi::document()
 }
 
 /// The public REST router.

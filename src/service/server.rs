@@ -195,18 +195,29 @@ impl Server {
         )
         .with_graceful_shutdown(wait());
         let admin = axum::serve(admin_l, admin_router(svc.clone())).with_graceful_shutdown(wait());
-        let reflection = tonic_reflection::server::Builder::configure()
-            .register_encoded_file_descriptor_set(pb::FILE_DESCRIPTOR_SET)
-            .build_v1()
-            .map_err(|e| ServiceError::Internal(format!("gRPC reflection: {e}")))?;
+        // Reflection in both versions (many clients still speak v1alpha), listing physnap's
+        // service and the health service.
+        let described = || {
+            tonic_reflection::server::Builder::configure()
+                .register_encoded_file_descriptor_set(pb::FILE_DESCRIPTOR_SET)
+                .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+        };
+        let reflection_err = |e| ServiceError::Internal(format!("gRPC reflection: {e}"));
+        let reflection = described().build_v1().map_err(reflection_err)?;
+        let reflection_alpha = described().build_v1alpha().map_err(reflection_err)?;
         let jobs = pb::job_service_server::JobServiceServer::new(GrpcJobs {
             svc: svc.clone(),
             tenants,
+            max_message_bytes: cfg.max_body_bytes,
         })
-        .max_decoding_message_size(cfg.max_body_bytes);
+        .max_decoding_message_size(
+            cfg.max_body_bytes
+                .saturating_mul(crate::service::grpc::DECODE_LIMIT_FACTOR),
+        );
         let grpc = tonic::transport::Server::builder()
             .add_service(health_svc)
             .add_service(reflection)
+            .add_service(reflection_alpha)
             .add_service(jobs)
             .serve_with_incoming_shutdown(TcpListenerStream::new(grpc_l), wait());
         let (h, a, g) = tokio::join!(async { http.await }, async { admin.await }, grpc);

@@ -99,7 +99,9 @@ impl Service {
         // Subscribe before reading the log, so no event falls between the two.
         let mut live = lock(&self.live).get(&rec.id).map(|l| l.tx.subscribe());
         let mut shutdown = self.shutdown_tx.subscribe();
-        let mut sent = after;
+        // A resume point beyond the job's log (a client cannot have seen events that do not
+        // exist yet) resumes from the log's end, so the stream still ends with `done`.
+        let mut sent = after.min(rec.sequence);
         let (mut last_step, mut previews_sent) = (None, 0u64);
         let throttle = Duration::from_millis(100);
         loop {

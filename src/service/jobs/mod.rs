@@ -82,6 +82,9 @@ pub enum ServiceError {
     /// No such job (or another tenant's).
     #[error("no job {0}")]
     NotFound(String),
+    /// No such route (REST): the path is not echoed.
+    #[error("no such route; the API lives under /v1 (see openapi.yaml)")]
+    NoRoute,
     /// The job is in the wrong state for the operation.
     #[error("{detail}")]
     Conflict {
@@ -131,7 +134,7 @@ impl ServiceError {
             ServiceError::Invalid(_) => "validation",
             ServiceError::QueueFull { .. } => "queue-full",
             ServiceError::ShuttingDown { .. } => "shutting-down",
-            ServiceError::NotFound(_) => "not-found",
+            ServiceError::NotFound(_) | ServiceError::NoRoute => "not-found",
             ServiceError::Conflict { kind, .. } => kind,
             ServiceError::IdempotencyReused { .. } => "idempotency-key-reused",
             ServiceError::Unauthenticated(_) => "unauthenticated",
@@ -484,10 +487,17 @@ impl Service {
     pub async fn list(
         &self,
         tenant: &str,
-        page_size: usize,
+        page_size: u32,
         page_token: Option<&str>,
     ) -> Result<JobList, ServiceError> {
-        let size = page_size.clamp(1, 500);
+        if !(1..=MAX_PAGE_SIZE).contains(&page_size) {
+            return Err(ServiceError::Invalid(Violation {
+                field: "page_size".into(),
+                limit: format!("1..={MAX_PAGE_SIZE}"),
+                value: page_size.to_string(),
+            }));
+        }
+        let size = page_size as usize;
         let after = match page_token.filter(|t| !t.is_empty()) {
             None => None,
             Some(t) => Some(decode_token(t).ok_or_else(|| Violation {
@@ -850,18 +860,23 @@ impl Service {
     }
 }
 
+/// Most jobs on one page of `list`.
+pub const MAX_PAGE_SIZE: u32 = 500;
+
 fn encode_token(id: &str) -> String {
     use base64::Engine as _;
     base64::engine::general_purpose::URL_SAFE_NO_PAD.encode(format!("after:{id}"))
 }
 
+/// A page token is a cursor: base64url (no padding) of `after:` and a job id. Any well-formed
+/// cursor is valid (the page starts after that id, known or not), so the OpenAPI pattern
+/// `^YWZ0ZXI6([A-Za-z0-9_-]{4})*$` describes exactly the tokens accepted.
 fn decode_token(t: &str) -> Option<String> {
     use base64::Engine as _;
     let b = base64::engine::general_purpose::URL_SAFE_NO_PAD
         .decode(t)
         .ok()?;
-    String::from_utf8(b)
-        .ok()?
+    String::from_utf8_lossy(&b)
         .strip_prefix("after:")
         .map(str::to_string)
 }

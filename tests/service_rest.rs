@@ -22,6 +22,11 @@ fn points_json(n: usize) -> Value {
     json!(cloud(n))
 }
 
+/// `n` test points as a PLY file (a raw upload body).
+fn ply(n: usize) -> Vec<u8> {
+    physnap::pointcloud::PointCloud { points: cloud(n) }.to_bytes(physnap::pointcloud::Format::Ply)
+}
+
 async fn submit(c: &reqwest::Client, url: &str, body: Value) -> reqwest::Response {
     c.post(url).json(&body).send().await.unwrap()
 }
@@ -582,12 +587,11 @@ async fn bad_inputs_get_problems_and_nothing_is_stored() {
     assert!(list["jobs"].as_array().unwrap().is_empty(), "{list}");
     assert_eq!(s.svc.counts().await.unwrap(), vec![]);
     // A valid raw PLY upload is accepted (the reader path).
-    let ply = physnap::pointcloud::PointCloud { points: cloud(40) }
-        .to_bytes(physnap::pointcloud::Format::Ply);
+    let upload = ply(40);
     let r = c
         .post(s.url("/v1/jobs?seed=3&resolution=8&category=Door"))
         .header("content-type", "application/x-ply")
-        .body(ply)
+        .body(upload)
         .send()
         .await
         .unwrap();
@@ -1396,11 +1400,10 @@ async fn the_server_accepts_and_refuses_what_the_document_says() {
     let job: Value = r.json().await.unwrap();
     assert_eq!(job["request"]["seed"], 2567);
     let id = job["id"].as_str().unwrap().to_string();
-    let ply = physnap::pointcloud::PointCloud { points: cloud(20) }
-        .to_bytes(physnap::pointcloud::Format::Ply);
+    let upload = ply(20);
     let r = auth(c.post(s.url("/v1/jobs?seed=7.0&steps=4&resolution=8.0")))
         .header("content-type", "application/x-ply")
-        .body(ply)
+        .body(upload)
         .send()
         .await
         .unwrap();
@@ -1426,12 +1429,11 @@ async fn the_server_accepts_and_refuses_what_the_document_says() {
         ("steps=1000000000000", "steps"),
         ("seed=18446744073709551616", "seed"),
     ] {
-        let ply = physnap::pointcloud::PointCloud { points: cloud(20) }
-            .to_bytes(physnap::pointcloud::Format::Ply);
+        let upload = ply(20);
         let p = problem(
             auth(c.post(s.url(&format!("/v1/jobs?{query}"))))
                 .header("content-type", "application/x-ply")
-                .body(ply)
+                .body(upload)
                 .send()
                 .await
                 .unwrap(),

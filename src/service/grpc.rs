@@ -18,7 +18,7 @@ use tonic::{Request, Response, Status};
 
 use super::api::{ARTIFACT_NAMES, JobView};
 use super::auth::Tenants;
-use super::jobs::{Service, ServiceError, WatchItem};
+use super::jobs::{DEFAULT_PAGE_SIZE, Service, ServiceError, WatchItem};
 use super::spec::{CameraInput, JobInput, PointsInput};
 
 /// Generated protobuf and tonic code for `proto/physnap/v1/jobs.proto`.
@@ -87,10 +87,13 @@ pub fn status_of(e: ServiceError) -> Status {
                 }
             }
         }
-        ServiceError::TooLarge { limit } => {
+        ServiceError::TooLarge { limit, size } => {
             md.insert("physnap-field", MetadataValue::from_static("message"));
             if let Ok(m) = MetadataValue::try_from(format!("<= {limit} bytes")) {
                 md.insert("physnap-limit", m);
+            }
+            if let Some(Ok(m)) = size.map(|n| MetadataValue::try_from(format!("{n} bytes"))) {
+                md.insert("physnap-value", m);
             }
         }
         ServiceError::QueueFull { retry_after, .. }
@@ -201,13 +204,10 @@ impl JobService for GrpcJobs {
         let r = req.into_inner();
         let size = prost::Message::encoded_len(&r);
         if size > self.max_message_bytes {
-            let mut s = status_of(ServiceError::TooLarge {
+            return Err(status_of(ServiceError::TooLarge {
                 limit: self.max_message_bytes,
-            });
-            if let Ok(v) = MetadataValue::try_from(format!("{size} bytes")) {
-                s.metadata_mut().insert("physnap-value", v);
-            }
-            return Err(s);
+                size: Some(size),
+            }));
         }
         let spec = r
             .spec
@@ -241,7 +241,11 @@ impl JobService for GrpcJobs {
         let tenant = self.tenant(&req)?;
         let r = req.into_inner();
         // 0 = the default, as proto3 cannot tell unset from 0.
-        let size = if r.page_size == 0 { 50 } else { r.page_size };
+        let size = if r.page_size == 0 {
+            DEFAULT_PAGE_SIZE
+        } else {
+            r.page_size
+        };
         let page = self
             .svc
             .list(&tenant, size, Some(r.page_token.as_str()))

@@ -30,7 +30,7 @@ use super::api::{
     media_type,
 };
 use super::auth::Tenants;
-use super::jobs::{Service, ServiceError, WatchItem};
+use super::jobs::{DEFAULT_PAGE_SIZE, Service, ServiceError, WatchItem};
 use super::spec::{JobInput, PointsInput};
 
 /// Shared state of the REST handlers.
@@ -178,7 +178,6 @@ fn at(uri: &Uri) -> impl Fn(ServiceError) -> ApiError + '_ {
     responses(
         (status = 202, description = "Accepted; `Location` names the job", body = JobView),
         (status = 400, description = "A body or query string that does not parse (not JSON, broken encoding)", body = Problem, content_type = "application/problem+json"),
-        (status = 401, description = "Missing or unknown bearer token", body = Problem, content_type = "application/problem+json"),
         (status = 413, description = "Body too large", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Unsupported content type", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "A field broke a limit or has the wrong type (each listed in `errors` with field, limit and value), query parameters came with a JSON body, or the Idempotency-Key was reused with another body", body = Problem, content_type = "application/problem+json"),
@@ -262,7 +261,7 @@ async fn read_body(
     headers: &HeaderMap,
     limit: usize,
 ) -> Result<Bytes, ServiceError> {
-    let too_large = ServiceError::TooLarge { limit };
+    let too_large = ServiceError::TooLarge { limit, size: None };
     let declared = headers
         .get(header::CONTENT_LENGTH)
         .and_then(|v| v.to_str().ok())
@@ -421,7 +420,6 @@ fn upload_params(q: &str) -> Result<UploadParams, ServiceError> {
     params(("id" = String, Path, description = "Job id")),
     responses(
         (status = 200, body = JobView),
-        (status = 401, description = "Missing or unknown bearer token", body = Problem, content_type = "application/problem+json"),
         (status = 404, description = "No such job for this tenant", body = Problem, content_type = "application/problem+json"),
     )
 )]
@@ -435,9 +433,6 @@ async fn get_job(
     let tenant = tenant(&st, &headers).map_err(&err)?;
     Ok(Json(st.svc.get(&tenant, &id).await.map_err(&err)?))
 }
-
-/// Jobs per page when `page_size` is not given.
-const DEFAULT_PAGE_SIZE: u32 = 50;
 
 /// Paging parameters.
 #[derive(Debug, Deserialize, utoipa::IntoParams)]
@@ -457,7 +452,6 @@ struct ListParams {
     responses(
         (status = 200, body = JobList),
         (status = 400, description = "A query string that does not parse", body = Problem, content_type = "application/problem+json"),
-        (status = 401, description = "Missing or unknown bearer token", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "page_size out of range or not an integer, or a page_token that is not one (listed in `errors`)", body = Problem, content_type = "application/problem+json"),
     )
 )]
@@ -489,7 +483,6 @@ async fn list_jobs(
     params(("id" = String, Path, description = "Job id")),
     responses(
         (status = 200, description = "The job: CANCELLED (at once when it was queued; also when it was already CANCELLED, so a retried cancel succeeds), or RUNNING with cancel_requested", body = JobView),
-        (status = 401, description = "Missing or unknown bearer token", body = Problem, content_type = "application/problem+json"),
         (status = 404, description = "No such job for this tenant", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "Already SUCCEEDED or FAILED", body = Problem, content_type = "application/problem+json"),
     )
@@ -511,7 +504,6 @@ async fn cancel_job(
     params(("id" = String, Path, description = "Job id")),
     responses(
         (status = 204, description = "Deleted"),
-        (status = 401, description = "Missing or unknown bearer token", body = Problem, content_type = "application/problem+json"),
         (status = 404, description = "No such job for this tenant", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "Not finished", body = Problem, content_type = "application/problem+json"),
     )
@@ -552,7 +544,6 @@ struct EventsParams {
         (status = 200, description = "text/event-stream", content_type = "text/event-stream", body = String),
         (status = 204, description = "The client has already seen the terminal event"),
         (status = 400, description = "A query string that does not parse", body = Problem, content_type = "application/problem+json"),
-        (status = 401, description = "Missing or unknown bearer token", body = Problem, content_type = "application/problem+json"),
         (status = 404, description = "No such job for this tenant", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "Last-Event-ID or after is not a sequence number (listed in `errors`)", body = Problem, content_type = "application/problem+json"),
     )
@@ -620,7 +611,6 @@ async fn events(
     params(("id" = String, Path, description = "Job id")),
     responses(
         (status = 200, body = Vec<ArtifactView>),
-        (status = 401, description = "Missing or unknown bearer token", body = Problem, content_type = "application/problem+json"),
         (status = 404, description = "No such job for this tenant", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "Not finished", body = Problem, content_type = "application/problem+json"),
     )
@@ -658,7 +648,6 @@ async fn list_artifacts(
     responses(
         (status = 200, description = "The file; ETag is its sha256", body = Vec<u8>, content_type = "application/octet-stream"),
         (status = 304, description = "If-None-Match matched the ETag"),
-        (status = 401, description = "Missing or unknown bearer token", body = Problem, content_type = "application/problem+json"),
         (status = 404, description = "No such job for this tenant, or no artefact of that name", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "Not finished", body = Problem, content_type = "application/problem+json"),
     )

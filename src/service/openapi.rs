@@ -94,6 +94,9 @@ fn field_rules(l: &Limits) -> Vec<(&'static str, Value)> {
     ]
 }
 
+/// The one operation without a token (`GET`; the categories the loaded weights know).
+const PUBLIC_PATH: &str = "/v1/categories";
+
 /// `frame`: surrounding white space is ignored; empty is the default.
 const FRAME_PATTERN: &str = r"^\s*(canonical|auto)?\s*$";
 
@@ -224,8 +227,19 @@ fn refine(doc: &mut Value, l: &Limits) {
             }
         }
     }
-    // The one public operation.
-    paths["/v1/categories"]["get"]["security"] = json!([]);
+    // Every operation but the one public one needs a token, and answers 401 without one.
+    for (path, ops) in paths.iter_mut() {
+        for op in ops.as_object_mut().into_iter().flat_map(|o| o.values_mut()) {
+            if path == PUBLIC_PATH {
+                op["security"] = json!([]);
+            } else {
+                op["responses"]["401"] = json!({
+                    "description": "Missing or unknown bearer token",
+                    "content": {"application/problem+json": {"schema": {"$ref": "#/components/schemas/Problem"}}}
+                });
+            }
+        }
+    }
     // The SSE stream, event by event: `data` is a JSON document of the kind's schema.
     let event = |kind: &str, data: Value| {
         json!({

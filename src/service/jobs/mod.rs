@@ -110,6 +110,8 @@ pub enum ServiceError {
     TooLarge {
         /// The limit (bytes).
         limit: usize,
+        /// The size received, when known (a gRPC message; a REST body is not read to its end).
+        size: Option<usize>,
     },
     /// A content type the endpoint does not take.
     #[error("unsupported content type {got:?} (use {expected})")]
@@ -862,6 +864,9 @@ impl Service {
 
 /// Most jobs on one page of `list`.
 pub const MAX_PAGE_SIZE: u32 = 500;
+
+/// Jobs per page when the client gives no page size (REST: absent, gRPC: 0).
+pub const DEFAULT_PAGE_SIZE: u32 = 50;
 
 fn encode_token(id: &str) -> String {
     use base64::Engine as _;

@@ -547,6 +547,31 @@ async fn cameras_w_free_and_repair_reach_the_job_and_its_ranking() {
             e.message()
         );
     }
+    // Several defects: one field/limit/value triple each, in order, and all in the message.
+    let e = refused(
+        &mut cl,
+        pb::JobSpec {
+            frame: "sideways".into(),
+            samples: Some(0),
+            resolution: Some(1),
+            ..quick.clone()
+        },
+    )
+    .await;
+    assert_eq!(e.code(), tonic::Code::InvalidArgument);
+    let all = |k: &str| -> Vec<String> {
+        e.metadata()
+            .get_all(k)
+            .iter()
+            .map(|v| v.to_str().unwrap().to_string())
+            .collect()
+    };
+    assert_eq!(all("physnap-field"), ["frame", "samples", "resolution"]);
+    assert_eq!(all("physnap-limit").len(), 3);
+    assert_eq!(all("physnap-value").len(), 3);
+    for f in ["frame", "samples", "resolution"] {
+        assert!(e.message().contains(f), "{}", e.message());
+    }
     s.shutdown().await;
 }
 

@@ -136,10 +136,16 @@ async fn submit_stream_download_validate_resume() {
     std::fs::write(&path, &glb).unwrap();
     let report = common::gltf_validate(&path);
     assert_eq!(report["numErrors"], 0, "{report:#}");
+    // Every media type the server sends is the one openapi.yaml documents for the download.
+    let doc: Value = serde_json::from_str(&physnap::service::http::openapi_document()).unwrap();
+    let documented =
+        &doc["paths"]["/v1/jobs/{id}/artifacts/{name}"]["get"]["responses"]["200"]["content"];
     for (name, media) in [
+        ("model.glb", "model/gltf-binary"),
         ("robot.zip", "application/zip"),
         ("model.xml", "application/xml"),
         ("object.json", "application/json"),
+        ("ranking.json", "application/json"),
     ] {
         let r = c
             .get(s.url(&format!("{loc}/artifacts/{name}")))
@@ -148,6 +154,10 @@ async fn submit_stream_download_validate_resume() {
             .unwrap();
         assert_eq!(r.status(), 200, "{name}");
         assert_eq!(r.headers()["content-type"], media, "{name}");
+        assert!(
+            documented.get(media).is_some(),
+            "{name}: {media} is not documented: {documented}"
+        );
         if name == "model.xml" {
             let xml = r.text().await.unwrap();
             assert!(
@@ -1443,6 +1453,70 @@ async fn the_server_accepts_and_refuses_what_the_document_says() {
         assert_eq!(p["errors"][0]["field"], field, "{query}: {p}");
         assert!(!p["errors"][0]["limit"].as_str().unwrap().is_empty(), "{p}");
     }
+    // Every violation of one request is listed, type errors and range errors together, in
+    // the body and in the query; nothing is stored.
+    let before = jobs_of(&c, &s, "secret-token-1").await;
+    let p = problem(
+        auth(c.post(s.url("/v1/jobs")))
+            .json(
+                &json!({"points": points_json(3), "seed": "soon", "steps": -2,
+                          "w_pc": -1.0, "resolution": 1, "wpc": 2,
+                          "points_ply_base64": "%%"}),
+            )
+            .send()
+            .await
+            .unwrap(),
+        422,
+    )
+    .await;
+    let mut fields: Vec<&str> = p["errors"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["field"].as_str().unwrap())
+        .collect();
+    fields.sort_unstable();
+    assert_eq!(
+        fields,
+        [
+            "points",
+            "points_ply_base64",
+            "resolution",
+            "seed",
+            "steps",
+            "w_pc",
+            "wpc"
+        ],
+        "{p:#}"
+    );
+    for e in p["errors"].as_array().unwrap() {
+        assert!(!e["limit"].as_str().unwrap().is_empty(), "{e}");
+        assert!(!e["value"].as_str().unwrap().is_empty(), "{e}");
+    }
+    let p = problem(
+        auth(c.post(
+            s.url("/v1/jobs?steps=x&seed=-1&samples=0&camera=1,2&camera=a&up=1,2&frame=sideways"),
+        ))
+        .header("content-type", "application/x-ply")
+        .body(ply(20))
+        .send()
+        .await
+        .unwrap(),
+        422,
+    )
+    .await;
+    let fields: Vec<&str> = p["errors"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["field"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        fields,
+        ["steps", "seed", "camera[1]", "up", "frame", "samples"],
+        "{p:#}"
+    );
+    assert_eq!(jobs_of(&c, &s, "secret-token-1").await, before);
     // Paging: page_size outside 1..=500 is refused with the field listed; any well-formed
     // cursor is a page.
     for bad in ["0", "501"] {
@@ -1547,4 +1621,18 @@ async fn cancel_twice_is_200_and_cancel_after_success_is_409() {
     )
     .await;
     s.shutdown().await;
+}
+
+/// How many jobs `token`'s tenant has.
+async fn jobs_of(c: &reqwest::Client, s: &support::TestServer, token: &str) -> usize {
+    let page: Value = c
+        .get(s.url("/v1/jobs?page_size=500"))
+        .bearer_auth(token)
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    page["jobs"].as_array().unwrap().len()
 }

@@ -322,40 +322,47 @@ pub struct UploadParams {
 }
 
 impl JobRequest {
-    /// Into the domain input. More than one points field is reported as `points` violating
-    /// "exactly one of ...".
-    pub fn into_input(self) -> Result<JobInput, Violation> {
-        let b64 = |field: &'static str, s: &str| {
+    /// Into the domain input, with what could not be read taken out and listed in
+    /// [`JobInput::refused`] (undecodable base64; more than one points field, reported as `points` violating "exactly one of
+    /// ..."), so that validation can still check the rest.
+    pub fn into_input(self) -> JobInput {
+        let mut refused = Vec::new();
+        let mut b64 = |field: &'static str, s: &str| {
             base64::engine::general_purpose::STANDARD
                 .decode(s.trim())
-                .map_err(|e| Violation {
-                    field: field.into(),
-                    limit: "valid base64".into(),
-                    value: e.to_string(),
+                .map_err(|e| {
+                    refused.push(Violation {
+                        field: field.into(),
+                        limit: "valid base64".into(),
+                        value: e.to_string(),
+                    })
                 })
+                .ok()
         };
         let mut given = Vec::new();
         if let Some(p) = self.points {
-            given.push(PointsInput::Triples(p));
+            given.push(Some(PointsInput::Triples(p)));
         }
         if let Some(s) = &self.points_f32le_base64 {
-            given.push(PointsInput::F32Le(b64("points_f32le_base64", s)?));
+            given.push(b64("points_f32le_base64", s).map(PointsInput::F32Le));
         }
         if let Some(s) = &self.points_ply_base64 {
-            given.push(PointsInput::Ply(b64("points_ply_base64", s)?));
+            given.push(b64("points_ply_base64", s).map(PointsInput::Ply));
         }
         if let Some(s) = &self.points_npy_base64 {
-            given.push(PointsInput::Npy(b64("points_npy_base64", s)?));
+            given.push(b64("points_npy_base64", s).map(PointsInput::Npy));
         }
         if given.len() > 1 {
-            return Err(Violation {
+            refused.push(Violation {
                 field: "points".into(),
                 limit: "exactly one of points, points_f32le_base64, points_ply_base64, points_npy_base64".into(),
                 value: format!("{} given", given.len()),
             });
+            given.clear();
         }
-        Ok(JobInput {
-            points: given.pop(),
+        JobInput {
+            refused,
+            points: given.pop().flatten(),
             category: self.category,
             w_pc: self.w_pc,
             w_pen: self.w_pen,
@@ -383,7 +390,7 @@ impl JobRequest {
             scale: self.scale,
             frame: self.frame,
             up: self.up,
-        })
+        }
     }
 }
 
@@ -402,19 +409,31 @@ fn camera_of_query(field: String, text: &str) -> Result<Vec<f64>, Violation> {
 
 impl UploadParams {
     /// Into the domain input with the uploaded cloud. One `camera` parameter is named `camera`
-    /// in errors, the j-th of several `camera[j]`.
-    pub fn into_input(self, points: PointsInput) -> Result<JobInput, Violation> {
+    /// in errors, the j-th of several `camera[j]`. What could not be read (cameras, `up`) is
+    /// taken out and listed in [`JobInput::refused`], so that validation can still check the rest.
+    pub fn into_input(self, points: PointsInput) -> JobInput {
+        let mut refused = Vec::new();
+        let mut keep = |r: Result<Vec<f64>, Violation>| r.map_err(|v| refused.push(v)).ok();
         let camera = match self.camera.as_slice() {
             [] => None,
-            [one] => Some(CameraInput::One(camera_of_query("camera".into(), one)?)),
-            many => Some(CameraInput::Many(
-                many.iter()
+            [one] => keep(camera_of_query("camera".into(), one)).map(CameraInput::One),
+            many => {
+                let read: Vec<Option<Vec<f64>>> = many
+                    .iter()
                     .enumerate()
-                    .map(|(j, c)| camera_of_query(format!("camera[{j}]"), c))
-                    .collect::<Result<_, _>>()?,
-            )),
+                    .map(|(j, c)| keep(camera_of_query(format!("camera[{j}]"), c)))
+                    .collect();
+                read.into_iter()
+                    .collect::<Option<Vec<_>>>()
+                    .map(CameraInput::Many)
+            }
         };
-        Ok(JobInput {
+        let up = self
+            .up
+            .as_deref()
+            .and_then(|u| parse_up(u).map_err(|v| refused.push(v)).ok());
+        JobInput {
+            refused,
             points: Some(points),
             category: self.category,
             w_pc: self.w_pc,
@@ -442,8 +461,8 @@ impl UploadParams {
             repair: self.repair,
             scale: self.scale,
             frame: self.frame,
-            up: self.up.as_deref().map(parse_up).transpose()?,
-        })
+            up,
+        }
     }
 }
 
@@ -701,7 +720,7 @@ pub struct Problem {
     /// The request path.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub instance: Option<String>,
-    /// Field errors.
+    /// Every field the request got wrong (type, limit or combination), in field order.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub errors: Vec<FieldError>,
     /// Seconds to wait before retrying (429, 503).

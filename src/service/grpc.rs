@@ -76,14 +76,26 @@ pub fn status_of(e: ServiceError) -> Status {
         md.insert("physnap-error-type", v);
     }
     match &e {
-        ServiceError::Invalid(v) => {
-            for (k, val) in [
-                ("physnap-field", &v.field),
-                ("physnap-limit", &v.limit),
-                ("physnap-value", &v.value),
-            ] {
-                if let Ok(m) = MetadataValue::try_from(val.as_str()) {
-                    md.insert(k, m);
+        // One field/limit/value triple per violation, in order (`get` reads the first,
+        // `get_all` every one); text that is not visible ASCII is escaped so the triples stay
+        // aligned.
+        ServiceError::Invalid(all) => {
+            for v in all.iter() {
+                for (k, val) in [
+                    ("physnap-field", &v.field),
+                    ("physnap-limit", &v.limit),
+                    ("physnap-value", &v.value),
+                ] {
+                    let ascii: String = val
+                        .chars()
+                        .map(|c| match c {
+                            ' '..='~' => c.to_string(),
+                            c => c.escape_unicode().to_string(),
+                        })
+                        .collect();
+                    if let Ok(m) = MetadataValue::try_from(ascii.as_str()) {
+                        md.append(k, m);
+                    }
                 }
             }
         }
@@ -177,6 +189,8 @@ pub fn input_of(spec: pb::JobSpec) -> JobInput {
         scale: Some(spec.scale).filter(|s| !s.is_empty()),
         frame: Some(spec.frame).filter(|s| !s.is_empty()),
         up: spec.up.map(|u| [u.x, u.y, u.z]),
+        // Protobuf types every field: nothing is refused for its type.
+        refused: Vec::new(),
     }
 }
 

@@ -84,13 +84,16 @@ pub fn problem_of(e: &ServiceError, instance: Option<String>) -> Problem {
         _ => None,
     };
     let errors = match e {
-        ServiceError::Invalid(v) => vec![FieldError {
-            pointer: pointer(&v.field),
-            field: v.field.clone(),
-            limit: v.limit.clone(),
-            value: v.value.clone(),
-            detail: v.to_string(),
-        }],
+        ServiceError::Invalid(all) => all
+            .iter()
+            .map(|v| FieldError {
+                pointer: pointer(&v.field),
+                field: v.field.clone(),
+                limit: v.limit.clone(),
+                value: v.value.clone(),
+                detail: v.to_string(),
+            })
+            .collect(),
         _ => Vec::new(),
     };
     let detail = match e {
@@ -180,7 +183,7 @@ fn at(uri: &Uri) -> impl Fn(ServiceError) -> ApiError + '_ {
         (status = 400, description = "A body or query string that does not parse (not JSON, broken encoding)", body = Problem, content_type = "application/problem+json"),
         (status = 413, description = "Body too large", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Unsupported content type", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "A field broke a limit or has the wrong type (each listed in `errors` with field, limit and value), query parameters came with a JSON body, or the Idempotency-Key was reused with another body", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Fields broke limits or have the wrong type (every one listed in `errors` with field, limit and value, in one answer), query parameters came with a JSON body, or the Idempotency-Key was reused with another body", body = Problem, content_type = "application/problem+json"),
         (status = 429, description = "Queue full; see Retry-After", body = Problem, content_type = "application/problem+json"),
         (status = 503, description = "Shutting down; see Retry-After", body = Problem, content_type = "application/problem+json"),
     )
@@ -221,7 +224,7 @@ async fn submit(
                 .ok()
                 .filter(|k| !k.is_empty() && k.len() <= 255)
                 .ok_or_else(|| {
-                    err(ServiceError::Invalid(super::spec::Violation {
+                    err(ServiceError::from(super::spec::Violation {
                         field: "Idempotency-Key".into(),
                         limit: "1..=255 visible ASCII characters".into(),
                         value: format!("{} bytes", v.len()),
@@ -296,10 +299,14 @@ async fn read_body(
 }
 
 /// A submission body (JSON request, or a raw PLY / NPY / f32le upload with the knobs in the
-/// query string) as the domain input.
+/// query string) as the domain input; fields of the wrong type are taken out and listed in
+/// [`JobInput::refused`].
 fn parse_body(ctype: &str, query: Option<&str>, body: &[u8]) -> Result<JobInput, ServiceError> {
     let upload = |points: PointsInput| -> Result<JobInput, ServiceError> {
-        Ok(upload_params(query.unwrap_or(""))?.into_input(points)?)
+        let (params, refused) = upload_params(query.unwrap_or(""))?;
+        let mut input = params.into_input(points);
+        input.refused.splice(0..0, refused);
+        Ok(input)
     };
     match ctype {
         "application/json" => {
@@ -311,24 +318,19 @@ fn parse_body(ctype: &str, query: Option<&str>, body: &[u8]) -> Result<JobInput,
                 .find(|p| !p.is_empty())
                 .map(|p| p.split('=').next().unwrap_or(p))
             {
-                return Err(ServiceError::Invalid(super::spec::Violation {
-                    field: name.chars().take(64).collect(),
-                    limit: "absent with a JSON body (query parameters are for raw uploads; put the field in the body)".into(),
-                    value: "given in the query string".into(),
-                }));
+                return Err(ServiceError::Invalid(
+                    super::spec::Violation {
+                        field: name.chars().take(64).collect(),
+                        limit: "absent with a JSON body (query parameters are for raw uploads; put the field in the body)".into(),
+                        value: "given in the query string".into(),
+                    }
+                    .into(),
+                ));
             }
-            let de = &mut serde_json::Deserializer::from_slice(body);
-            let req: JobRequest = serde_path_to_error::deserialize(de).map_err(|e| {
-                if e.inner().classify() == serde_json::error::Category::Data {
-                    let msg = e.inner().to_string();
-                    // serde_json appends " at line L column C" to data errors.
-                    let msg = msg.split(" at line ").next().unwrap_or(&msg);
-                    ServiceError::Invalid(type_violation(&e.path().to_string(), msg))
-                } else {
-                    ServiceError::Malformed(e.to_string())
-                }
-            })?;
-            Ok(req.into_input()?)
+            let (req, refused) = json_request(body)?;
+            let mut input = req.into_input();
+            input.refused.splice(0..0, refused);
+            Ok(input)
         }
         "application/x-ply" | "application/ply" | "model/x-ply" => {
             upload(PointsInput::Ply(body.to_vec()))
@@ -340,6 +342,54 @@ fn parse_body(ctype: &str, query: Option<&str>, body: &[u8]) -> Result<JobInput,
             expected: "application/json, application/x-ply, application/x-npy or application/octet-stream",
         }),
     }
+}
+
+/// Most fields one request can have refused for their type (a bound on the re-reads of
+/// [`json_request`] and [`upload_params`]; more than the request has).
+const MAX_TYPE_ERRORS: usize = 64;
+
+/// The top-level name of a field path (`points[3][1]` → `points`).
+fn top_field(path: &str) -> &str {
+    path.split(['[', '.']).next().unwrap_or(path)
+}
+
+/// The JSON request with every field of the wrong type (or unknown) taken out and listed: the
+/// body is read again without each field a type error names, so that a request with five bad
+/// fields hears of all five.
+fn json_request(body: &[u8]) -> Result<(JobRequest, Vec<super::spec::Violation>), ServiceError> {
+    let data_error = |e: &serde_path_to_error::Error<serde_json::Error>| {
+        let msg = e.inner().to_string();
+        // serde_json appends " at line L column C" to errors read from text.
+        let msg = msg.split(" at line ").next().unwrap_or(&msg).to_string();
+        type_violation(&e.path().to_string(), &msg)
+    };
+    // The common case, a valid request, is read straight from the text.
+    let de = &mut serde_json::Deserializer::from_slice(body);
+    let first = match serde_path_to_error::deserialize::<_, JobRequest>(de) {
+        Ok(req) => return Ok((req, Vec::new())),
+        Err(e) if e.inner().classify() == serde_json::error::Category::Data => data_error(&e),
+        Err(e) => return Err(ServiceError::Malformed(e.to_string())),
+    };
+    let mut value: serde_json::Value =
+        serde_json::from_slice(body).map_err(|e| ServiceError::Malformed(e.to_string()))?;
+    let mut refused = vec![first];
+    while refused.len() <= MAX_TYPE_ERRORS {
+        let field = top_field(&refused[refused.len() - 1].field).to_string();
+        if value
+            .as_object_mut()
+            .and_then(|o| o.remove(&field))
+            .is_none()
+        {
+            break;
+        }
+        match serde_path_to_error::deserialize::<_, JobRequest>(&value) {
+            Ok(req) => return Ok((req, refused)),
+            Err(e) => refused.push(data_error(&e)),
+        }
+    }
+    Err(ServiceError::Invalid(
+        super::spec::Violations::new(refused).expect("at least the first"),
+    ))
 }
 
 /// A value of the wrong type (or out of its type's range) as a field violation:
@@ -379,7 +429,7 @@ fn query_error(e: axum::extract::rejection::QueryRejection) -> ServiceError {
                     .chars()
                     .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-') =>
         {
-            ServiceError::Invalid(type_violation(field, detail))
+            ServiceError::Invalid(type_violation(field, detail).into())
         }
         _ => ServiceError::Malformed(text),
     }
@@ -396,22 +446,44 @@ fn query_parse<T: serde::de::DeserializeOwned>(q: &str) -> Result<T, ServiceErro
         .map_err(query_error)
 }
 
-/// The knobs of a raw upload. `camera` may repeat, which serde_urlencoded does not take into a
-/// struct field: its values are collected first (in order) and the other pairs parsed as
-/// [`UploadParams`].
-fn upload_params(q: &str) -> Result<UploadParams, ServiceError> {
+/// The knobs of a raw upload, with every parameter of the wrong type (or unknown) taken out and
+/// listed. `camera` may repeat, which serde_urlencoded does not take into a struct field: its
+/// values are collected first (in order) and the other pairs parsed as [`UploadParams`].
+fn upload_params(q: &str) -> Result<(UploadParams, Vec<super::spec::Violation>), ServiceError> {
     let mut cameras = Vec::new();
     let mut rest = Vec::new();
     // serde_urlencoded splits pairs at '&' alone, as here.
     for pair in q.split('&').filter(|p| !p.is_empty()) {
         match query_parse::<Vec<(String, String)>>(pair)?.as_slice() {
             [(k, v)] if k == "camera" => cameras.push(v.clone()),
-            _ => rest.push(pair),
+            [(k, _)] => rest.push((k.clone(), pair)),
+            _ => rest.push((String::new(), pair)),
         }
     }
-    let mut params: UploadParams = query_parse(&rest.join("&"))?;
-    params.camera = cameras;
-    Ok(params)
+    let mut refused = Vec::new();
+    loop {
+        let query: Vec<&str> = rest.iter().map(|(_, p)| *p).collect();
+        match query_parse::<UploadParams>(&query.join("&")) {
+            Ok(mut params) => {
+                params.camera = cameras;
+                return Ok((params, refused));
+            }
+            Err(ServiceError::Invalid(v)) if refused.len() < MAX_TYPE_ERRORS => {
+                let v = v.first().clone();
+                let before = rest.len();
+                rest.retain(|(k, _)| k != top_field(&v.field));
+                refused.push(v);
+                if rest.len() == before {
+                    break;
+                }
+            }
+            Err(e) if refused.is_empty() => return Err(e),
+            Err(_) => break,
+        }
+    }
+    Err(ServiceError::Invalid(
+        super::spec::Violations::new(refused).expect("at least one"),
+    ))
 }
 
 /// Get a job.
@@ -564,7 +636,7 @@ async fn events(
             .ok()
             .and_then(|s| s.trim().parse::<u64>().ok())
             .ok_or_else(|| {
-                err(ServiceError::Invalid(super::spec::Violation {
+                err(ServiceError::from(super::spec::Violation {
                     field: "Last-Event-ID".into(),
                     limit: "a non-negative integer sequence".into(),
                     value: format!("{v:?}"),

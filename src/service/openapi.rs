@@ -12,7 +12,7 @@
 use serde_json::{Value, json};
 use utoipa::OpenApi as _;
 
-use super::api::ARTIFACT_NAMES;
+use super::api::{ARTIFACT_NAMES, media_type};
 use super::jobs::MAX_PAGE_SIZE;
 use super::spec::{Limits, MAX_TAU, SAMPLER_DDIM, SAMPLER_DDPM};
 use crate::engine::free_space::MAX_CAMERAS;
@@ -227,6 +227,17 @@ fn refine(doc: &mut Value, l: &Limits) {
             }
         }
     }
+    // One media type per artefact kind, the one the server sends (`media_type`).
+    let mut content = serde_json::Map::new();
+    for name in ARTIFACT_NAMES {
+        let schema = match media_type(name) {
+            "application/json" => json!({"type": "object"}),
+            _ => json!({"type": "string", "format": "binary"}),
+        };
+        content.insert(media_type(name).to_string(), json!({ "schema": schema }));
+    }
+    paths["/v1/jobs/{id}/artifacts/{name}"]["get"]["responses"]["200"]["content"] =
+        Value::Object(content);
     // Every operation but the one public one needs a token, and answers 401 without one.
     for (path, ops) in paths.iter_mut() {
         for op in ops.as_object_mut().into_iter().flat_map(|o| o.values_mut()) {

@@ -35,7 +35,7 @@ use super::queue::{Full, QueueState};
 mod fanout;
 
 use super::runner::{Models, Progress, RunError, run_job};
-use super::spec::{JobInput, Limits, ModelCaps, Violation, validate};
+use super::spec::{JobInput, Limits, ModelCaps, Violation, Violations, validate};
 use super::store::{Artifact, JobFailure, JobRecord, JobState, Store, StoreError, StoredEvent};
 use fanout::Live;
 pub use fanout::{Snapshot, WatchItem};
@@ -60,9 +60,9 @@ pub struct ServiceConfig {
 /// Errors of the service layer; each transport maps them once (problem+json, gRPC status).
 #[derive(Debug, thiserror::Error)]
 pub enum ServiceError {
-    /// The request broke a limit.
+    /// The request broke limits (every one it broke).
     #[error("{0}")]
-    Invalid(#[from] Violation),
+    Invalid(#[from] Violations),
     /// The queue is full.
     #[error("queue is full: {queued} jobs queued (limit {capacity})")]
     QueueFull {
@@ -127,6 +127,12 @@ pub enum ServiceError {
     /// Anything else (I/O on artefacts, a panicked task).
     #[error("internal error: {0}")]
     Internal(String),
+}
+
+impl From<Violation> for ServiceError {
+    fn from(v: Violation) -> Self {
+        ServiceError::Invalid(v.into())
+    }
 }
 
 impl ServiceError {
@@ -492,22 +498,32 @@ impl Service {
         page_size: u32,
         page_token: Option<&str>,
     ) -> Result<JobList, ServiceError> {
+        let mut refused = Vec::new();
         if !(1..=MAX_PAGE_SIZE).contains(&page_size) {
-            return Err(ServiceError::Invalid(Violation {
+            refused.push(Violation {
                 field: "page_size".into(),
                 limit: format!("1..={MAX_PAGE_SIZE}"),
                 value: page_size.to_string(),
-            }));
+            });
         }
         let size = page_size as usize;
         let after = match page_token.filter(|t| !t.is_empty()) {
             None => None,
-            Some(t) => Some(decode_token(t).ok_or_else(|| Violation {
-                field: "page_token".into(),
-                limit: "a token returned by a previous page".into(),
-                value: format!("{t:?}"),
-            })?),
+            Some(t) => {
+                let after = decode_token(t);
+                if after.is_none() {
+                    refused.push(Violation {
+                        field: "page_token".into(),
+                        limit: "a token returned by a previous page".into(),
+                        value: format!("{t:?}"),
+                    });
+                }
+                after
+            }
         };
+        if let Some(all) = Violations::new(refused) {
+            return Err(ServiceError::Invalid(all));
+        }
         let tenant_s = tenant.to_string();
         let recs = self
             .db(move |s| s.list(&tenant_s, after.as_deref(), size + 1))

@@ -2,6 +2,20 @@
 
 use super::*;
 
+/// [`super::validate`] for a request with at most one defect: the one violation it reports
+/// (the tests below each break one rule; [`every_violation_is_listed`] breaks several).
+fn validate(
+    input: &JobInput,
+    caps: &ModelCaps,
+    limits: &Limits,
+    seed: u64,
+) -> Result<JobSpec, Violation> {
+    super::validate(input, caps, limits, seed).map_err(|all| {
+        assert_eq!(all.len(), 1, "one defect, one violation: {all}");
+        all.first().clone()
+    })
+}
+
 fn caps() -> ModelCaps {
     ModelCaps {
         categories: vec!["Door".into(), "Window".into()],
@@ -623,4 +637,51 @@ fn frame_auto_is_estimated_at_submission_and_bad_frames_are_refused() {
         e.field == "points" && e.limit.contains("frame canonical"),
         "{e:?}"
     );
+}
+
+#[test]
+fn every_violation_is_listed() {
+    // Five defects in one request: all five are reported, in field order, and nothing about
+    // the fields that depend on a rejected one (n_g and preview_every on steps).
+    let input = JobInput {
+        points: Some(cloud(3)),
+        category: Some("Spaceship".into()),
+        w_pc: Some(-1.0),
+        steps: Some(5000),
+        n_g: Some(4000),
+        preview_every: Some(4000),
+        resolution: Some(1),
+        sampler: Some("ddpm".into()),
+        eta: Some(0.5),
+        ..JobInput::default()
+    };
+    let all = super::validate(&input, &caps(), &Limits::default(), 0).unwrap_err();
+    let fields: Vec<&str> = all.iter().map(|v| v.field.as_str()).collect();
+    assert_eq!(
+        fields,
+        ["points", "category", "w_pc", "eta", "steps", "resolution"],
+        "{all}"
+    );
+    assert_eq!(all.first().field, "points");
+    assert!(all.to_string().contains("invalid resolution"), "{all}");
+}
+
+#[test]
+fn a_field_the_transport_refused_is_listed_once() {
+    // The transport took `steps` (a string) and `points_ply_base64` (not base64) out: each is
+    // listed as refused, not again as missing or defaulted; the rest is still checked.
+    let refused = |field: &str| Violation {
+        field: field.into(),
+        limit: "u32".into(),
+        value: "string \"many\"".into(),
+    };
+    let input = JobInput {
+        points: None,
+        samples: Some(0),
+        refused: vec![refused("steps"), refused("points_ply_base64")],
+        ..JobInput::default()
+    };
+    let all = super::validate(&input, &caps(), &Limits::default(), 0).unwrap_err();
+    let fields: Vec<&str> = all.iter().map(|v| v.field.as_str()).collect();
+    assert_eq!(fields, ["steps", "points_ply_base64", "samples"], "{all}");
 }

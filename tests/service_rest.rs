@@ -1469,12 +1469,7 @@ async fn the_server_accepts_and_refuses_what_the_document_says() {
         422,
     )
     .await;
-    let mut fields: Vec<&str> = p["errors"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|e| e["field"].as_str().unwrap())
-        .collect();
+    let mut fields = error_fields(&p);
     fields.sort_unstable();
     assert_eq!(
         fields,
@@ -1505,14 +1500,8 @@ async fn the_server_accepts_and_refuses_what_the_document_says() {
         422,
     )
     .await;
-    let fields: Vec<&str> = p["errors"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|e| e["field"].as_str().unwrap())
-        .collect();
     assert_eq!(
-        fields,
+        error_fields(&p),
         ["steps", "seed", "camera[1]", "up", "frame", "samples"],
         "{p:#}"
     );
@@ -1550,6 +1539,18 @@ async fn the_server_accepts_and_refuses_what_the_document_says() {
     )
     .await;
     assert_eq!(p["errors"][0]["field"], "Last-Event-ID", "{p}");
+    // A resume point past the store's sequences is refused, in the query even when the
+    // header is the one used.
+    let p = problem(
+        auth(c.get(s.url(&format!("/v1/jobs/{id}/events?after=9223372036854775808"))))
+            .header("last-event-id", "1")
+            .send()
+            .await
+            .unwrap(),
+        422,
+    )
+    .await;
+    assert_eq!(p["errors"][0]["field"], "after", "{p}");
     // The artefact-name 404 and the unknown-route 404 do not echo the request.
     for path in [
         format!("/v1/jobs/{id}/artifacts/..%2F..%2Fetc%2Fpasswd-probe"),
@@ -1635,4 +1636,14 @@ async fn jobs_of(c: &reqwest::Client, s: &support::TestServer, token: &str) -> u
         .await
         .unwrap();
     page["jobs"].as_array().unwrap().len()
+}
+
+/// The fields a problem document lists in `errors`, in order.
+fn error_fields(p: &Value) -> Vec<&str> {
+    p["errors"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["field"].as_str().unwrap())
+        .collect()
 }

@@ -630,18 +630,25 @@ async fn events(
     let err = at(&uri);
     let tenant = tenant(&st, &headers).map_err(&err)?;
     let Query(q) = q.map_err(|e| err(query_error(e)))?;
+    // Sequences are at most i64::MAX (the store's integer); both resume points are checked,
+    // whichever is used (the header wins).
+    let beyond = |field: &str, value: String| {
+        err(ServiceError::from(super::spec::Violation {
+            field: field.into(),
+            limit: format!("a non-negative integer sequence <= {}", i64::MAX),
+            value,
+        }))
+    };
+    if let Some(a) = q.after.filter(|&a| a > i64::MAX as u64) {
+        return Err(beyond("after", a.to_string()));
+    }
     let after = match headers.get("last-event-id") {
         Some(v) => v
             .to_str()
             .ok()
             .and_then(|s| s.trim().parse::<u64>().ok())
-            .ok_or_else(|| {
-                err(ServiceError::from(super::spec::Violation {
-                    field: "Last-Event-ID".into(),
-                    limit: "a non-negative integer sequence".into(),
-                    value: format!("{v:?}"),
-                }))
-            })?,
+            .filter(|&a| a <= i64::MAX as u64)
+            .ok_or_else(|| beyond("Last-Event-ID", format!("{v:?}")))?,
         None => q.after.unwrap_or(0),
     };
     let job = st.svc.get(&tenant, &id).await.map_err(&err)?;

@@ -214,7 +214,7 @@ fn refine(doc: &mut Value, l: &Limits) {
     if let Some(params) = paths["/v1/jobs/{id}/events"]["get"]["parameters"].as_array_mut() {
         for p in params {
             if p["name"] == "after" || p["name"] == "Last-Event-ID" {
-                merge(&mut p["schema"], &json!({"maximum": u64::MAX}));
+                merge(&mut p["schema"], &json!({"maximum": i64::MAX}));
             }
         }
     }

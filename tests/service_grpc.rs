@@ -18,7 +18,8 @@ fn spec(points: Vec<f32>) -> pb::JobSpec {
         // weights from diverging.
         sampler: "ddim".into(),
         steps: Some(40),
-        n_g: Some(10),
+        // The last 10 of the 40 steps (t < 250).
+        n_g: Some(250),
         tau: Some(1000.0),
         guidance_max_step: Some(0.05),
         ..Default::default()
@@ -434,7 +435,7 @@ async fn cameras_w_free_and_repair_reach_the_job_and_its_ranking() {
     let cam = |x, y, z| pb::Vec3 { x, y, z };
     let quick = pb::JobSpec {
         steps: Some(10),
-        n_g: Some(5),
+        n_g: Some(500),
         refine_steps: Some(2),
         resolution: Some(8),
         ..spec(flat.clone())

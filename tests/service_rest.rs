@@ -776,7 +776,7 @@ async fn guided_ddim_job_streams_losses_and_ranks_best_of_n() {
         &c,
         &s.url("/v1/jobs"),
         json!({"points": points_json(64), "seed": 3, "samples": 2, "resolution": 8,
-               "sampler": "ddim", "eta": 0.0, "steps": 20, "n_g": 10, "w_pc": 15.0,
+               "sampler": "ddim", "eta": 0.0, "steps": 20, "n_g": 500, "w_pc": 15.0,
                "tau": 1000.0, "preview_every": 1, "guidance_max_step": 0.05,
                "repair": "off"}),
     )
@@ -788,7 +788,7 @@ async fn guided_ddim_job_streams_losses_and_ranks_best_of_n() {
     assert_eq!(req["guided"], true);
     assert_eq!(
         (req["n_g"].as_u64(), req["steps"].as_u64()),
-        (Some(10), Some(20))
+        (Some(500), Some(20))
     );
     assert_eq!(
         (req["sampler"].as_str(), req["tau"].as_f64()),
@@ -851,7 +851,7 @@ async fn guided_ddim_job_streams_losses_and_ranks_best_of_n() {
             assert!(g[k].as_f64().is_some_and(f64::is_finite), "{k}: {g}");
         }
         assert!(g["l_pc"].as_f64().unwrap() > 0.0, "{g}");
-        // Only the last n_g = 10 steps are guided.
+        // Only the steps with t < n_g = 500 are guided: the last 10 of the 20.
         assert!(p["step"].as_u64().unwrap() > 10, "{p}");
     }
 
@@ -866,7 +866,7 @@ async fn guided_ddim_job_streams_losses_and_ranks_best_of_n() {
         .unwrap();
     assert_eq!(ranking["format"], "physnap.job_ranking/v1");
     assert_eq!(ranking["guided"], true);
-    assert_eq!(ranking["guidance"]["n_g"], 10);
+    assert_eq!(ranking["guidance"]["n_g"], 500);
     assert_eq!(ranking["guidance"]["refine_steps"], 30);
     assert_eq!(ranking["retrieval"], "off");
     assert_eq!(ranking["joint_motion"], "dominant");
@@ -915,7 +915,7 @@ async fn physics_refinement_steps_are_a_job_setting_counted_in_progress() {
             &c,
             &s.url("/v1/jobs"),
             json!({"points": points_json(64), "seed": 5, "resolution": 8, "sampler": "ddim",
-                   "steps": 10, "n_g": 5, "w_pc": 15.0, "w_pen": w_phys, "w_mob": w_phys,
+                   "steps": 10, "n_g": 500, "w_pc": 15.0, "w_pen": w_phys, "w_mob": w_phys,
                    "guidance_max_step": 0.05, "refine_steps": 2, "refine_physics_steps": 3}),
         )
         .await;
@@ -1002,7 +1002,7 @@ async fn cameras_w_free_and_repair_reach_the_job_and_its_ranking() {
     let c = client();
     // cloud(64) lies in [-0.5, 0.5] × [-0.3, 0.3] × [0.1, 0.9]: both cameras are outside it.
     let quick = json!({"points": points_json(64), "seed": 5, "resolution": 8,
-                       "sampler": "ddim", "steps": 10, "n_g": 5, "refine_steps": 2,
+                       "sampler": "ddim", "steps": 10, "n_g": 500, "refine_steps": 2,
                        "guidance_max_step": 0.05});
     // JSON, one camera as a single triple: ℓ_free at its default weight, repair on.
     let mut body = quick.clone();
@@ -1081,7 +1081,7 @@ async fn cameras_w_free_and_repair_reach_the_job_and_its_ranking() {
     let r = c
         .post(s.url(
             "/v1/jobs?camera=-2,0,0.5&camera=0%2C-2%2C0.5&w_free=3&repair=off&seed=5\
-             &resolution=8&sampler=ddim&steps=10&n_g=5&refine_steps=2&guidance_max_step=0.05",
+             &resolution=8&sampler=ddim&steps=10&n_g=500&refine_steps=2&guidance_max_step=0.05",
         ))
         .header("content-type", "application/x-npy")
         .body(npy.clone())
@@ -1158,7 +1158,7 @@ async fn frame_auto_is_estimated_at_submission_and_reaches_the_artefacts() {
         }
     }
     let body = json!({"points": pts, "seed": 5, "resolution": 8, "sampler": "ddim",
-                      "steps": 10, "n_g": 5, "refine_steps": 2, "guidance_max_step": 0.05,
+                      "steps": 10, "n_g": 500, "refine_steps": 2, "guidance_max_step": 0.05,
                       "camera": [-1.5, -1.5, 1.5], "frame": "auto", "up": [0.0, 0.0, 1.0]});
     let r = submit(&c, &s.url("/v1/jobs"), body).await;
     assert_eq!(r.status(), 202);
@@ -1198,7 +1198,7 @@ async fn guidance_and_sampler_fields_are_validated() {
     let s = start(Opts::default()).await;
     let c = client();
     let cases = [
-        (json!({"steps": 20, "n_g": 21}), "n_g", "21"),
+        (json!({"steps": 20, "n_g": 2500}), "n_g", "2500"),
         (json!({"n_g": 1001}), "n_g", "1001"),
         (json!({"tau": 0.0}), "tau", "0"),
         (json!({"tau": -3.5}), "tau", "-3.5"),
@@ -1309,7 +1309,7 @@ async fn a_job_whose_samples_all_diverge_fails_with_the_reason() {
         &c,
         &s.url("/v1/jobs"),
         json!({"points": points_json(64), "seed": 3, "samples": 2, "resolution": 8,
-               "sampler": "ddim", "steps": 20, "n_g": 10, "w_pc": 1.0e6,
+               "sampler": "ddim", "steps": 20, "n_g": 500, "w_pc": 1.0e6,
                "guidance_max_step": 0.0}),
     )
     .await;

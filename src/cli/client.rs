@@ -58,8 +58,8 @@ pub struct SubmitArgs {
     /// Mobility loss weight (server default: 3 × the paper's 2 ÷ active terms; 0 turns it off).
     #[arg(long, env = "PHYSNAP_W_MOB")]
     w_mob: Option<f64>,
-    /// n_g: how many of the final reverse steps are guided (server default: 500 of 1000,
-    /// scaled to --steps).
+    /// n_g, as in the paper: guide the reverse steps with diffusion time t < this (0-1000;
+    /// server default 500).
     #[arg(long, env = "PHYSNAP_N_G")]
     n_g: Option<u32>,
     /// Temperature τ of the point-to-part soft assignment (server default 1000).

@@ -114,9 +114,47 @@ pub(crate) struct GenerateArgs {
         allow_hyphen_values = true
     )]
     pub(crate) up: String,
+    /// Quality preset: fast (50 reverse steps, 10 refinement steps, meshing resolution 24),
+    /// standard (the defaults below) or best (500 reverse steps, resolution 48, best of 4
+    /// samples). A flag or environment variable given explicitly wins over the preset.
+    #[arg(long, env = "PHYSNAP_QUALITY", default_value = "standard", value_parser = ["fast", "standard", "best"])]
+    pub(crate) quality: String,
     /// Sampler and guidance schedule.
     #[command(flatten)]
     pub(crate) sampling: SamplingArgs,
+}
+
+/// What a `--quality` preset sets: (reverse steps, refinement steps, meshing resolution,
+/// samples); None keeps the flag's default.
+pub(crate) fn quality_preset(
+    name: &str,
+) -> (Option<usize>, Option<usize>, Option<usize>, Option<usize>) {
+    match name {
+        "fast" => (Some(50), Some(10), Some(24), None),
+        "best" => (Some(500), None, Some(48), Some(4)),
+        _ => (None, None, None, None),
+    }
+}
+
+impl GenerateArgs {
+    /// Applies `--quality` to the flags `matches` (this subcommand's) holds at their defaults.
+    pub(crate) fn apply_quality(&mut self, matches: &clap::ArgMatches) {
+        let default =
+            |id: &str| matches.value_source(id) == Some(clap::parser::ValueSource::DefaultValue);
+        let (steps, refine, resolution, samples) = quality_preset(&self.quality);
+        if let (Some(v), true) = (steps, default("steps")) {
+            self.sampling.steps = v;
+        }
+        if let (Some(v), true) = (refine, default("guidance_refine_steps")) {
+            self.sampling.guidance_refine_steps = v;
+        }
+        if let (Some(v), true) = (resolution, default("resolution")) {
+            self.resolution = v;
+        }
+        if let (Some(v), true) = (samples, default("samples")) {
+            self.samples = v;
+        }
+    }
 }
 
 /// `--up x,y,z` as a vector (the estimate checks it is finite and non-zero).
@@ -239,9 +277,10 @@ impl CategoryGuidanceArgs {
 #[derive(Args, Debug)]
 #[command(next_help_heading = "Sampling and guidance schedule")]
 pub(crate) struct SamplingArgs {
-    /// Guide the steps with diffusion time t < this (n_g).
-    #[arg(long, hide_short_help = true, env = "PHYSNAP_GUIDANCE_STEPS", default_value_t = physnap::engine::guidance::DEFAULT_GUIDED_STEPS)]
-    pub(crate) guidance_steps: usize,
+    /// n_g, as in the paper: guide the reverse steps with diffusion time t < this (0-1000; the
+    /// REST and gRPC field `n_g` is the same number).
+    #[arg(long = "n-g", alias = "guidance-steps", hide_short_help = true, env = "PHYSNAP_N_G", default_value_t = physnap::engine::guidance::DEFAULT_GUIDED_STEPS)]
+    pub(crate) n_g: usize,
     /// Temperature τ of the point-to-part soft assignment.
     #[arg(long, hide_short_help = true, env = "PHYSNAP_TAU", default_value_t = physnap::engine::guidance::DEFAULT_TAU)]
     pub(crate) tau: f64,
@@ -261,7 +300,7 @@ pub(crate) struct SamplingArgs {
     /// The paper's sampler is `--sampler ddpm --steps 0`.
     #[arg(long, hide_short_help = true, env = "PHYSNAP_SAMPLER", default_value = "ddim", value_parser = ["ddpm", "ddim"])]
     pub(crate) sampler: String,
-    /// Reverse steps (0: all 1000). Guidance applies to those with t < --guidance-steps.
+    /// Reverse steps (0: all 1000). Guidance applies to those with t < --n-g.
     #[arg(long, hide_short_help = true, env = "PHYSNAP_STEPS", default_value_t = physnap::engine::sample::DEFAULT_STEPS)]
     pub(crate) steps: usize,
     /// DDIM noise level η in [0, 1].
@@ -304,7 +343,7 @@ impl SamplingArgs {
             w_mob,
             cameras: Vec::new(),
             w_free: 0.0,
-            steps: self.guidance_steps,
+            steps: self.n_g,
             tau: self.tau,
             max_step: max_step(self.guidance_max_step),
             refine_steps: self.guidance_refine_steps,
@@ -466,7 +505,7 @@ pub(crate) fn generate(a: GenerateArgs) -> anyhow::Result<()> {
     pb.finish_and_clear();
     if results.is_empty() {
         bail!(
-            "all {} samples diverged (first: {}); lower the guidance weights (--w-pc/--w-pen/--w-mob) or --guidance-steps",
+            "all {} samples diverged (first: {}); lower the guidance weights (--w-pc/--w-pen/--w-mob) or --n-g",
             a.samples,
             diverged.first().map(|d| d.2.as_str()).unwrap_or("")
         );

@@ -86,7 +86,14 @@ pub(crate) enum Command {
 }
 
 pub(crate) fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let matches = <Cli as clap::CommandFactory>::command().get_matches();
+    let mut cli =
+        <Cli as clap::FromArgMatches>::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    // Presets need to know which flags were given, which only the matches tell.
+    if let (Command::Generate(a), Some(("generate", m))) = (&mut cli.command, matches.subcommand())
+    {
+        a.apply_quality(m);
+    }
     let filter = tracing_subscriber::EnvFilter::try_new(&cli.log)
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
     tracing_subscriber::fmt()
@@ -179,6 +186,9 @@ mod tests {
             "--seed",
             "--out",
             "--weights",
+            "--camera",
+            "--frame",
+            "--quality",
         ] {
             assert!(short.contains(user), "{user} missing from -h:\n{short}");
         }
@@ -192,5 +202,45 @@ mod tests {
             assert!(long.contains(knob), "{knob} missing from --help");
         }
         assert!(long.contains("Sampling and guidance schedule"), "{long}");
+    }
+
+    /// `--quality` sets the flags left at their defaults; a flag or env twin given wins.
+    #[test]
+    fn quality_presets_fill_only_the_flags_not_given() {
+        use clap::FromArgMatches;
+        let parse = |args: &[&str]| {
+            let m = Cli::command()
+                .try_get_matches_from(
+                    ["physnap", "generate", "--out", "o"]
+                        .iter()
+                        .chain(args.iter()),
+                )
+                .unwrap();
+            let mut cli = Cli::from_arg_matches(&m).unwrap();
+            let super::Command::Generate(a) = &mut cli.command else {
+                panic!("not generate");
+            };
+            a.apply_quality(m.subcommand_matches("generate").unwrap());
+            (
+                a.sampling.steps,
+                a.sampling.guidance_refine_steps,
+                a.resolution,
+                a.samples,
+            )
+        };
+        let standard = parse(&[]);
+        assert_eq!(standard, parse(&["--quality", "standard"]));
+        assert_eq!(parse(&["--quality", "fast"]), (50, 10, 24, standard.3));
+        assert_eq!(parse(&["--quality", "best"]), (500, standard.1, 48, 4));
+        // Explicit flags win, even when they equal the default.
+        assert_eq!(
+            parse(&["--quality", "best", "--samples", "1", "--steps", "200"]),
+            (200, standard.1, 48, 1)
+        );
+        let bad = Cli::command()
+            .try_get_matches_from(["physnap", "generate", "--out", "o", "--quality", "max"])
+            .unwrap_err()
+            .to_string();
+        assert!(bad.contains("--quality") && bad.contains("max"), "{bad}");
     }
 }

@@ -132,16 +132,15 @@ pub fn import_dir(
     std::fs::create_dir_all(out.join("objects")).map_err(DataError::io(out))?;
     let total = dirs.len();
     let done = std::sync::atomic::AtomicUsize::new(0);
-    let results: Vec<(String, Result<ImportedObject, String>)> = dirs
+    let results: Vec<(String, Result<ImportedObject, DataError>)> = dirs
         .par_iter()
         .map(|dir| {
             let name = dir
                 .file_name()
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_default();
-            let r = read_object(dir).map_err(|e| e.to_string()).and_then(|o| {
-                write_object_samples(&o, &out.join("objects").join(&o.id), opts)
-                    .map_err(|e| e.to_string())?;
+            let r = read_object(dir).and_then(|o| {
+                write_object_samples(&o, &out.join("objects").join(&o.id), opts)?;
                 Ok(o)
             });
             let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
@@ -160,7 +159,7 @@ pub fn import_dir(
                 }
                 imported.push(o);
             }
-            Err(reason) => report.skipped.push((name, reason)),
+            Err(reason) => report.skipped.push((name, reason.to_string())),
         }
     }
     let splits = assign_splits(&imported, opts.seed);

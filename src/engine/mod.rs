@@ -18,7 +18,7 @@ use crate::graph::{EDGE_DIM, GraphTensor, K, NODE_DIM, NUM_EDGES};
 use burn::tensor::{Device, Tensor, TensorData};
 
 /// Errors of the engine layer.
-#[derive(Debug, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum EngineError {
     /// An option is out of range.
     #[error("invalid {0}")]

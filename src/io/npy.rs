@@ -132,11 +132,17 @@ pub fn parse_header(bytes: &[u8]) -> Result<Header, NpyError> {
     };
     let dict = match parser.peek() {
         Some(b'{') => parser.dict(0),
-        _ => Err(format!("expected a dict, {}", parser.unexpected())),
+        _ => Err(SyntaxError(format!(
+            "expected a dict, {}",
+            parser.unexpected()
+        ))),
     }
     .and_then(|d| match parser.peek() {
         None => Ok(d),
-        Some(_) => Err(format!("after the dict: {}", parser.unexpected())),
+        Some(_) => Err(SyntaxError(format!(
+            "after the dict: {}",
+            parser.unexpected()
+        ))),
     })
     .map_err(|e| mal(format!("header dict: {e}")))?;
     let Py::Dict(mut entries) = dict else {
@@ -340,6 +346,11 @@ impl std::fmt::Display for Py {
     }
 }
 
+/// What is wrong with an NPY header's Python literal, and where.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub(crate) struct SyntaxError(pub(crate) String);
+
 /// Recursive-descent parser for the Python literal subset numpy writes in NPY headers.
 pub(crate) struct PyParser<'a> {
     pub(crate) s: &'a [u8],
@@ -360,25 +371,28 @@ impl PyParser<'_> {
         self.s.get(self.pos).copied()
     }
 
-    pub(crate) fn unexpected(&self) -> String {
+    pub(crate) fn unexpected(&self) -> SyntaxError {
         match self.s.get(self.pos) {
             Some(_) => {
                 let near = &self.s[self.pos..(self.pos + 12).min(self.s.len())];
                 let c = String::from_utf8_lossy(near).chars().next().unwrap_or('?');
-                format!(
+                SyntaxError(format!(
                     "unexpected '{}' at offset {} (near '{}')",
                     c.escape_debug(),
                     self.pos,
                     snippet(near)
-                )
+                ))
             }
-            None => "unexpected end of header".to_string(),
+            None => SyntaxError("unexpected end of header".to_string()),
         }
     }
 
-    pub(crate) fn value(&mut self, depth: usize) -> Result<Py, String> {
+    pub(crate) fn value(&mut self, depth: usize) -> Result<Py, SyntaxError> {
         if depth > Self::MAX_DEPTH {
-            return Err(format!("nested deeper than {}", Self::MAX_DEPTH));
+            return Err(SyntaxError(format!(
+                "nested deeper than {}",
+                Self::MAX_DEPTH
+            )));
         }
         match self.peek() {
             Some(q @ (b'\'' | b'"')) => self.string(q),
@@ -395,23 +409,27 @@ impl PyParser<'_> {
                     b"True" => Ok(Py::Bool(true)),
                     b"False" => Ok(Py::Bool(false)),
                     b"None" => Ok(Py::None),
-                    word => Err(format!(
+                    word => Err(SyntaxError(format!(
                         "unknown name '{}' at offset {start}",
                         snippet(word)
-                    )),
+                    ))),
                 }
             }
             _ => Err(self.unexpected()),
         }
     }
 
-    pub(crate) fn string(&mut self, quote: u8) -> Result<Py, String> {
+    pub(crate) fn string(&mut self, quote: u8) -> Result<Py, SyntaxError> {
         let start = self.pos;
         self.pos += 1;
         let mut out = Vec::new();
         loop {
             match self.s.get(self.pos) {
-                None => return Err(format!("unterminated string starting at offset {start}")),
+                None => {
+                    return Err(SyntaxError(format!(
+                        "unterminated string starting at offset {start}"
+                    )));
+                }
                 Some(&b) if b == quote => {
                     self.pos += 1;
                     return Ok(Py::Str(String::from_utf8_lossy(&out).into_owned()));
@@ -422,7 +440,9 @@ impl PyParser<'_> {
                         Some(b'n') => out.push(b'\n'),
                         Some(&c) => out.extend_from_slice(&[b'\\', c]),
                         None => {
-                            return Err(format!("unterminated string starting at offset {start}"));
+                            return Err(SyntaxError(format!(
+                                "unterminated string starting at offset {start}"
+                            )));
                         }
                     }
                     self.pos += 2;
@@ -435,7 +455,7 @@ impl PyParser<'_> {
         }
     }
 
-    pub(crate) fn int(&mut self) -> Result<Py, String> {
+    pub(crate) fn int(&mut self) -> Result<Py, SyntaxError> {
         let start = self.pos;
         if matches!(self.s.get(self.pos), Some(b'-' | b'+')) {
             self.pos += 1;
@@ -453,14 +473,14 @@ impl PyParser<'_> {
             .and_then(|t| t.parse::<i128>().ok())
             .map(Py::Int)
             .ok_or_else(|| {
-                format!(
+                SyntaxError(format!(
                     "'{}' at offset {start} is not a valid integer",
                     snippet(text)
-                )
+                ))
             })
     }
 
-    pub(crate) fn seq(&mut self, close: u8, depth: usize) -> Result<Vec<Py>, String> {
+    pub(crate) fn seq(&mut self, close: u8, depth: usize) -> Result<Vec<Py>, SyntaxError> {
         self.pos += 1; // opening bracket
         let mut items = Vec::new();
         loop {
@@ -477,7 +497,7 @@ impl PyParser<'_> {
         }
     }
 
-    pub(crate) fn dict(&mut self, depth: usize) -> Result<Py, String> {
+    pub(crate) fn dict(&mut self, depth: usize) -> Result<Py, SyntaxError> {
         self.pos += 1; // '{'
         let mut entries = Vec::new();
         loop {

@@ -11,185 +11,115 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::runner::{Preview, Progress};
-use super::spec::{CameraInput, JobInput, JobSpec, PointsInput, Violation};
+use super::spec::{CameraInput, JobInput, JobSpec, PointsInput, Violation, request_knobs};
 use super::store::{Artifact, JobRecord};
 
-/// A job request (`POST /v1/jobs`, `application/json`). Give the point cloud in exactly one of
-/// `points`, `points_f32le_base64`, `points_ply_base64`, `points_npy_base64`.
-///
-/// The cloud (16–100 000 finite points) guides the sampler (PhysNAP loss guidance: ℓ_pc, ℓ_pen,
-/// ℓ_mob with weights `w_pc`, `w_pen`, `w_mob` over the last `n_g` steps, temperature `tau`;
-/// with a `camera`, also the free-space loss ℓ_free at `w_free`); with every weight 0 the job
-/// samples unguided. Best-of-N samples are ranked by D_pc (mean point-to-mesh distance to the
-/// cloud) and the best one is exported.
-#[derive(Debug, Clone, Default, Deserialize, Serialize, ToSchema)]
-#[serde(deny_unknown_fields)]
-pub struct JobRequest {
-    /// `[[x, y, z], ...]`, object frame, metres.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub points: Option<Vec<[f64; 3]>>,
-    /// Base64 of little-endian f32 triples.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub points_f32le_base64: Option<String>,
-    /// Base64 of a PLY file (any PLY encoding).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub points_ply_base64: Option<String>,
-    /// Base64 of a NumPy `(N, 3)` float array.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub points_npy_base64: Option<String>,
-    /// Category (see `/v1/categories`); absent = unconditional.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub category: Option<String>,
-    /// Point-cloud loss weight ℓ_pc (>= 0). Default: the paper's 45 ÷ active terms (15).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub w_pc: Option<f64>,
-    /// Penetration loss weight ℓ_pen (>= 0). Default: physnap's 3 × the paper's 2 ÷ active terms
-    /// (2 with all three terms); 0 turns it off.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub w_pen: Option<f64>,
-    /// Mobility loss weight ℓ_mob (>= 0). Default: physnap's 3 × the paper's 2 ÷ active terms
-    /// (2 with all three terms); 0 turns it off.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub w_mob: Option<f64>,
-    /// n_g: how many of the final reverse steps are guided (<= steps). Default: the paper's 500
-    /// of 1000, scaled to `steps` (e.g. 10 of 20).
-    #[serde(
-        default,
-        skip_serializing_if = "Option::is_none",
-        deserialize_with = "integral::opt_u32"
-    )]
-    pub n_g: Option<u32>,
-    /// τ: temperature of the soft point-to-part correspondence in ℓ_pc (finite, > 0; default
-    /// 1000).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub tau: Option<f64>,
-    /// Clamp each guidance-gradient entry to ±this (model space; finite, >= 0; default 0.02).
-    /// A deviation from the paper's raw gradient, which diverges with the shipped weights;
-    /// 0 = off (the paper's raw step).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub guidance_max_step: Option<f64>,
-    /// Refinement steps after sampling (physnap, not in the paper): small clamped gradient
-    /// steps on the guidance loss of the finished sample (0-1000; default 30; 0 = off, the
-    /// paper).
-    #[serde(
-        default,
-        skip_serializing_if = "Option::is_none",
-        deserialize_with = "integral::opt_u32"
-    )]
-    pub refine_steps: Option<u32>,
-    /// Physics-only refinement steps after the refinement steps: ℓ_pen and ℓ_mob alone, part
-    /// boxes only (0-1000; default 0 = off). They run only when `w_pen` or `w_mob` is > 0.
-    #[serde(
-        default,
-        skip_serializing_if = "Option::is_none",
-        deserialize_with = "integral::opt_u32"
-    )]
-    pub refine_physics_steps: Option<u32>,
-    /// Sampler: `ddim` (default) or `ddpm` (NAP's; strided ancestral with fewer steps). The
-    /// paper's sampler is `ddpm` with 1000 steps.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub sampler: Option<String>,
-    /// DDIM noise level η in [0, 1] (default 0); only with `sampler` `ddim` (the default).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub eta: Option<f64>,
-    /// Reverse steps, 1–1000 (default 200; 1000 is the full schedule).
-    #[serde(
-        default,
-        skip_serializing_if = "Option::is_none",
-        deserialize_with = "integral::opt_u32"
-    )]
-    pub steps: Option<u32>,
-    /// Seed of sample 0; absent = random, echoed in `request.seed`.
-    #[serde(
-        default,
-        skip_serializing_if = "Option::is_none",
-        deserialize_with = "integral::opt_u64"
-    )]
-    pub seed: Option<u64>,
-    /// Best-of-N samples (1–16).
-    #[serde(
-        default,
-        skip_serializing_if = "Option::is_none",
-        deserialize_with = "integral::opt_u32"
-    )]
-    pub samples: Option<u32>,
-    /// Seconds from submission until the job fails with `deadline-exceeded`.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub deadline_seconds: Option<f64>,
-    /// Attach an x̂₀ preview to every this many steps' progress (0 = never).
-    #[serde(
-        default,
-        skip_serializing_if = "Option::is_none",
-        deserialize_with = "integral::opt_u32"
-    )]
-    pub preview_every: Option<u32>,
-    /// Marching-cubes resolution (8–128, default 32).
-    #[serde(
-        default,
-        skip_serializing_if = "Option::is_none",
-        deserialize_with = "integral::opt_u32"
-    )]
-    pub resolution: Option<u32>,
-    /// Replace part shapes by their nearest training code of the weights' codebook: `auto`
-    /// (default: `empty` when the weights have a codebook, else `off`), `off`, `empty` (shapes
-    /// that mesh empty), `all` (NAP's retrieval variant) or `category` (with a category: every
-    /// part takes the nearest code of that category's training parts).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub retrieval: Option<String>,
-    /// Classifier-free category guidance w in [0, 20] (jobs with a category only):
-    /// ε̂ = ε̂(c) + w·(ε̂(c) − ε̂(∅)); 0 = plain conditioning. Default 0 for a scan-guided job
-    /// (w = 2 completed scans further from the scanned object), 2 without loss guidance (all
-    /// weights 0).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub category_guidance: Option<f64>,
-    /// Apply the category guidance only in reverse steps with diffusion time t below this,
-    /// 1-1000; 1000 = every step, the default for a scan-guided job. Default 500 without loss
-    /// guidance (all weights 0): above t = 500 the guidance bought no category accuracy there,
-    /// only larger objects with more parts, and those steps take one denoiser forward instead
-    /// of two.
-    #[serde(
-        default,
-        skip_serializing_if = "Option::is_none",
-        deserialize_with = "integral::opt_u32"
-    )]
-    pub category_guidance_below: Option<u32>,
-    /// Joint motions of the result: `screw` (NAP: each joint keeps its rotation and
-    /// translation ranges; URDF screws need a helper link) or `dominant` (each joint keeps only
-    /// the wider range, in units of the model's feature scales: plain revolute and prismatic
-    /// joints). Default `dominant`.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub joint_motion: Option<String>,
-    /// Sensor position(s) the scan was taken from (object frame, metres): one `[x, y, z]` or a
-    /// list `[[x, y, z], ...]` of at most 16, each 3 finite numbers with |coordinate| <= 1000,
-    /// outside the axis-aligned box of the points. Turns on the free-space loss ℓ_free (weight
-    /// `w_free`) and, with `repair` on, the removal of parts in space the cameras saw through.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub camera: Option<CameraRequest>,
-    /// Free-space loss weight ℓ_free (>= 0). Default: 15 (ℓ_pc's) with a camera; 0 without one
-    /// (a weight given without a camera is ignored).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub w_free: Option<f64>,
-    /// Joint repair and part removal: `on` (default: hinges onto their part's edge or centre
-    /// line, axes snapped to box axes, children attached, parts the scan does not allow removed
-    /// (empty, in the cameras' free space, floating); listed in `object.json` and
-    /// `ranking.json`) or `off` (the raw projection).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub repair: Option<String>,
-    /// Scale hypothesis: `auto` (default: the scan is scaled so its box diagonal is the
-    /// category's typical procedural size, at most ×/÷ 4, and the result scaled back), `off`, or
-    /// a factor such as `"2.5"` (1/16–16).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub scale: Option<String>,
-    /// The scan's frame: `canonical` (default: physnap's frame, +Z up, front −X, floor z = 0)
-    /// or `auto` (any right-handed metric frame whose up is `up`: the floor, yaw and position
-    /// are estimated at submission; `object.json`, the URDF's `world` link, the MJCF root and
-    /// the GLB root node put the model back in the scan's frame).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub frame: Option<String>,
-    /// The scan's up direction with `frame: auto`, `[x, y, z]` (default `[0, 0, 1]`).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub up: Option<[f64; 3]>,
+/// Defines the REST request types from the knob list ([`request_knobs`]): the JSON body
+/// [`JobRequest`] and the query parameters of a raw upload [`UploadParams`], with their
+/// conversions into a [`JobInput`].
+macro_rules! wire_requests {
+    ($($(#[doc = $doc:literal])* $name:ident: $ty:ty,)*) => {
+        /// A job request (`POST /v1/jobs`, `application/json`). Give the point cloud in exactly
+        /// one of `points`, `points_f32le_base64`, `points_ply_base64`, `points_npy_base64`.
+        ///
+        /// The cloud (16–100 000 finite points) guides the sampler (PhysNAP loss guidance:
+        /// ℓ_pc, ℓ_pen, ℓ_mob with weights `w_pc`, `w_pen`, `w_mob` in the steps with
+        /// diffusion time t < `n_g`, temperature `tau`; with a `camera`, also the free-space
+        /// loss ℓ_free at `w_free`); with every weight 0 the job samples unguided. Best-of-N
+        /// samples are ranked by one score (D_pc, free space, attachment, overlaps; listed in
+        /// `ranking.json`) and the best one is exported.
+        #[derive(Debug, Clone, Default, Deserialize, Serialize, ToSchema)]
+        #[serde(deny_unknown_fields)]
+        pub struct JobRequest {
+            /// `[[x, y, z], ...]`, object frame, metres.
+            #[serde(default, skip_serializing_if = "Option::is_none")]
+            pub points: Option<Vec<[f64; 3]>>,
+            /// Base64 of little-endian f32 triples.
+            #[serde(default, skip_serializing_if = "Option::is_none")]
+            pub points_f32le_base64: Option<String>,
+            /// Base64 of a PLY file (any PLY encoding).
+            #[serde(default, skip_serializing_if = "Option::is_none")]
+            pub points_ply_base64: Option<String>,
+            /// Base64 of a NumPy `(N, 3)` float array.
+            #[serde(default, skip_serializing_if = "Option::is_none")]
+            pub points_npy_base64: Option<String>,
+            $(
+                $(#[doc = $doc])*
+                #[serde(
+                    default,
+                    skip_serializing_if = "Option::is_none",
+                    deserialize_with = "knob::opt"
+                )]
+                pub $name: Option<$ty>,
+            )*
+            /// Sensor position(s) the scan was taken from (object frame, metres): one
+            /// `[x, y, z]` or a list `[[x, y, z], ...]` of at most 16, each 3 finite numbers
+            /// with |coordinate| <= 1000, outside the axis-aligned box of the points. Turns on
+            /// the free-space loss ℓ_free (weight `w_free`) and, with `repair` on, the removal
+            /// of parts in space the cameras saw through.
+            #[serde(default, skip_serializing_if = "Option::is_none")]
+            pub camera: Option<CameraRequest>,
+            /// The scan's up direction with `frame: auto`, `[x, y, z]` (default `[0, 0, 1]`).
+            #[serde(default, skip_serializing_if = "Option::is_none")]
+            pub up: Option<[f64; 3]>,
+        }
+
+        /// Query parameters of a raw upload (`POST /v1/jobs` with a PLY, NPY or f32le body):
+        /// the same knobs as [`JobRequest`] without the points.
+        #[derive(Debug, Clone, Default, Deserialize, ToSchema, utoipa::IntoParams)]
+        #[serde(deny_unknown_fields)]
+        #[into_params(parameter_in = Query)]
+        pub struct UploadParams {
+            $(
+                $(#[doc = $doc])*
+                #[serde(default, deserialize_with = "knob::opt")]
+                pub $name: Option<$ty>,
+            )*
+            /// Sensor position `x,y,z` (object frame, metres); repeat the parameter for several
+            /// (at most 16).
+            #[serde(default)]
+            #[param(style = Form, explode)]
+            pub camera: Vec<String>,
+            /// The scan's up direction `x,y,z` with `frame=auto` (default `0,0,1`).
+            pub up: Option<String>,
+        }
+
+        impl JobRequest {
+            /// Into the domain input, with what could not be read taken out and listed in
+            /// [`JobInput::refused`] (undecodable base64; more than one points field, reported
+            /// as `points` violating "exactly one of ..."), so that validation can still check
+            /// the rest.
+            pub fn into_input(mut self) -> JobInput {
+                let (points, refused) = self.points_input();
+                JobInput {
+                    refused,
+                    points,
+                    $($name: self.$name,)*
+                    camera: self.camera.map(CameraInput::from),
+                    up: self.up,
+                }
+            }
+        }
+
+        impl UploadParams {
+            /// Into the domain input with the uploaded cloud. One `camera` parameter is named
+            /// `camera` in errors, the j-th of several `camera[j]`. What could not be read
+            /// (cameras, `up`) is taken out and listed in [`JobInput::refused`], so that
+            /// validation can still check the rest.
+            pub fn into_input(self, points: PointsInput) -> JobInput {
+                let (camera, up, refused) = self.camera_and_up();
+                JobInput {
+                    refused,
+                    points: Some(points),
+                    $($name: self.$name,)*
+                    camera,
+                    up,
+                }
+            }
+        }
+    };
 }
+request_knobs!(wire_requests);
 
 /// `camera` of a [`JobRequest`]: one sensor position or a list of them. Its OpenAPI schema is
 /// written out below (the derive cannot say "3 numbers").
@@ -247,85 +177,10 @@ impl From<CameraRequest> for CameraInput {
     }
 }
 
-/// Query parameters of a raw upload (`POST /v1/jobs` with a PLY, NPY or f32le body): the same
-/// knobs as [`JobRequest`] without the points.
-#[derive(Debug, Clone, Default, Deserialize, ToSchema, utoipa::IntoParams)]
-#[serde(deny_unknown_fields)]
-#[into_params(parameter_in = Query)]
-pub struct UploadParams {
-    /// Category.
-    pub category: Option<String>,
-    /// Point-cloud loss weight.
-    pub w_pc: Option<f64>,
-    /// Penetration loss weight.
-    pub w_pen: Option<f64>,
-    /// Mobility loss weight.
-    pub w_mob: Option<f64>,
-    /// Guided final reverse steps (n_g).
-    #[serde(default, deserialize_with = "integral::opt_u32")]
-    pub n_g: Option<u32>,
-    /// Temperature τ of ℓ_pc.
-    pub tau: Option<f64>,
-    /// Guidance-gradient clamp.
-    pub guidance_max_step: Option<f64>,
-    /// Refinement steps after sampling.
-    #[serde(default, deserialize_with = "integral::opt_u32")]
-    pub refine_steps: Option<u32>,
-    /// Physics-only refinement steps after the refinement steps.
-    #[serde(default, deserialize_with = "integral::opt_u32")]
-    pub refine_physics_steps: Option<u32>,
-    /// Sampler (`ddpm` or `ddim`).
-    pub sampler: Option<String>,
-    /// DDIM η.
-    pub eta: Option<f64>,
-    /// Reverse steps.
-    #[serde(default, deserialize_with = "integral::opt_u32")]
-    pub steps: Option<u32>,
-    /// Seed.
-    #[serde(default, deserialize_with = "integral::opt_u64")]
-    pub seed: Option<u64>,
-    /// Best-of-N.
-    #[serde(default, deserialize_with = "integral::opt_u32")]
-    pub samples: Option<u32>,
-    /// Deadline (s).
-    pub deadline_seconds: Option<f64>,
-    /// Preview period.
-    #[serde(default, deserialize_with = "integral::opt_u32")]
-    pub preview_every: Option<u32>,
-    /// Meshing resolution.
-    #[serde(default, deserialize_with = "integral::opt_u32")]
-    pub resolution: Option<u32>,
-    /// Codebook retrieval (`auto`, `off`, `empty`, `all`, `category`).
-    pub retrieval: Option<String>,
-    /// Classifier-free category guidance w.
-    pub category_guidance: Option<f64>,
-    /// Category guidance only at diffusion time t below this (1-1000).
-    #[serde(default, deserialize_with = "integral::opt_u32")]
-    pub category_guidance_below: Option<u32>,
-    /// Joint motions (`screw`, `dominant`).
-    pub joint_motion: Option<String>,
-    /// Sensor position `x,y,z` (object frame, metres); repeat the parameter for several (at
-    /// most 16).
-    #[serde(default)]
-    #[param(style = Form, explode)]
-    pub camera: Vec<String>,
-    /// Free-space loss weight ℓ_free (default 15 with a camera, 0 without).
-    pub w_free: Option<f64>,
-    /// Joint repair and part removal (`on`, `off`).
-    pub repair: Option<String>,
-    /// Scale hypothesis (`auto`, `off` or a factor).
-    pub scale: Option<String>,
-    /// The scan's frame (`canonical`, `auto`).
-    pub frame: Option<String>,
-    /// The scan's up direction `x,y,z` with `frame=auto` (default `0,0,1`).
-    pub up: Option<String>,
-}
-
 impl JobRequest {
-    /// Into the domain input, with what could not be read taken out and listed in
-    /// [`JobInput::refused`] (undecodable base64; more than one points field, reported as `points` violating "exactly one of
-    /// ..."), so that validation can still check the rest.
-    pub fn into_input(self) -> JobInput {
+    /// The one points field given, decoded, and what was refused: undecodable base64, or more
+    /// than one points field (reported as `points` violating "exactly one of ...").
+    fn points_input(&mut self) -> (Option<PointsInput>, Vec<Violation>) {
         let mut refused = Vec::new();
         let mut b64 = |field: &'static str, s: &str| {
             base64::engine::general_purpose::STANDARD
@@ -340,7 +195,7 @@ impl JobRequest {
                 .ok()
         };
         let mut given = Vec::new();
-        if let Some(p) = self.points {
+        if let Some(p) = self.points.take() {
             given.push(Some(PointsInput::Triples(p)));
         }
         if let Some(s) = &self.points_f32le_base64 {
@@ -360,37 +215,7 @@ impl JobRequest {
             });
             given.clear();
         }
-        JobInput {
-            refused,
-            points: given.pop().flatten(),
-            category: self.category,
-            w_pc: self.w_pc,
-            w_pen: self.w_pen,
-            w_mob: self.w_mob,
-            n_g: self.n_g,
-            tau: self.tau,
-            guidance_max_step: self.guidance_max_step,
-            refine_steps: self.refine_steps,
-            refine_physics_steps: self.refine_physics_steps,
-            sampler: self.sampler,
-            eta: self.eta,
-            steps: self.steps,
-            seed: self.seed,
-            samples: self.samples,
-            deadline_seconds: self.deadline_seconds,
-            preview_every: self.preview_every,
-            resolution: self.resolution,
-            retrieval: self.retrieval,
-            category_guidance: self.category_guidance,
-            category_guidance_below: self.category_guidance_below,
-            joint_motion: self.joint_motion,
-            camera: self.camera.map(CameraInput::from),
-            w_free: self.w_free,
-            repair: self.repair,
-            scale: self.scale,
-            frame: self.frame,
-            up: self.up,
-        }
+        (given.pop().flatten(), refused)
     }
 }
 
@@ -408,10 +233,8 @@ fn camera_of_query(field: String, text: &str) -> Result<Vec<f64>, Violation> {
 }
 
 impl UploadParams {
-    /// Into the domain input with the uploaded cloud. One `camera` parameter is named `camera`
-    /// in errors, the j-th of several `camera[j]`. What could not be read (cameras, `up`) is
-    /// taken out and listed in [`JobInput::refused`], so that validation can still check the rest.
-    pub fn into_input(self, points: PointsInput) -> JobInput {
+    /// The `camera` and `up` parameters read, and those that could not be read.
+    fn camera_and_up(&self) -> (Option<CameraInput>, Option<[f64; 3]>, Vec<Violation>) {
         let mut refused = Vec::new();
         let mut keep = |r: Result<Vec<f64>, Violation>| r.map_err(|v| refused.push(v)).ok();
         let camera = match self.camera.as_slice() {
@@ -432,37 +255,7 @@ impl UploadParams {
             .up
             .as_deref()
             .and_then(|u| parse_up(u).map_err(|v| refused.push(v)).ok());
-        JobInput {
-            refused,
-            points: Some(points),
-            category: self.category,
-            w_pc: self.w_pc,
-            w_pen: self.w_pen,
-            w_mob: self.w_mob,
-            n_g: self.n_g,
-            tau: self.tau,
-            guidance_max_step: self.guidance_max_step,
-            refine_steps: self.refine_steps,
-            refine_physics_steps: self.refine_physics_steps,
-            sampler: self.sampler,
-            eta: self.eta,
-            steps: self.steps,
-            seed: self.seed,
-            samples: self.samples,
-            deadline_seconds: self.deadline_seconds,
-            preview_every: self.preview_every,
-            resolution: self.resolution,
-            retrieval: self.retrieval,
-            category_guidance: self.category_guidance,
-            category_guidance_below: self.category_guidance_below,
-            joint_motion: self.joint_motion,
-            camera,
-            w_free: self.w_free,
-            repair: self.repair,
-            scale: self.scale,
-            frame: self.frame,
-            up,
-        }
+        (camera, up, refused)
     }
 }
 
@@ -502,7 +295,7 @@ pub struct RequestView {
     pub w_pen: f64,
     /// Mobility loss weight.
     pub w_mob: f64,
-    /// Guided final reverse steps (n_g).
+    /// n_g: the steps with diffusion time t < n_g were guided.
     pub n_g: u32,
     /// Temperature τ of ℓ_pc.
     pub tau: f64,
@@ -893,6 +686,47 @@ pub fn job_view(r: &JobRecord, progress: Option<&Progress>, cancel_requested: bo
 /// Integer fields as JSON Schema reads them: an integer is any number with no fractional part,
 /// so `2567.0` is the integer 2567 (and a query string's `"2567.0"` too). Fractions, negatives
 /// and values beyond the type are refused with serde's usual type error.
+/// The deserialiser of every knob field: a knob's type picks how it is read ([`knob::Knob`]).
+pub(crate) mod knob {
+    use serde::{Deserialize, Deserializer};
+
+    /// A knob's value type.
+    pub trait Knob: Sized {
+        /// `Option<Self>` from JSON or a query value (`null` is `None`).
+        fn read<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Self>, D::Error>;
+    }
+
+    impl Knob for f64 {
+        fn read<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Self>, D::Error> {
+            Option::<f64>::deserialize(d)
+        }
+    }
+
+    impl Knob for String {
+        fn read<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Self>, D::Error> {
+            Option::<String>::deserialize(d)
+        }
+    }
+
+    /// Integers also from an integral float or a string ([`super::integral`]).
+    impl Knob for u32 {
+        fn read<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Self>, D::Error> {
+            super::integral::opt_u32(d)
+        }
+    }
+
+    impl Knob for u64 {
+        fn read<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Self>, D::Error> {
+            super::integral::opt_u64(d)
+        }
+    }
+
+    /// `deserialize_with` of a knob field.
+    pub fn opt<'de, D: Deserializer<'de>, T: Knob>(d: D) -> Result<Option<T>, D::Error> {
+        T::read(d)
+    }
+}
+
 pub(crate) mod integral {
     use serde::de::{self, Deserializer, Visitor};
     use std::fmt;

@@ -19,7 +19,7 @@ use tonic::{Request, Response, Status};
 use super::api::{ARTIFACT_NAMES, JobView};
 use super::auth::Tenants;
 use super::jobs::{DEFAULT_PAGE_SIZE, Service, ServiceError, WatchItem};
-use super::spec::{CameraInput, JobInput, PointsInput};
+use super::spec::{CameraInput, JobInput, PointsInput, request_knobs};
 
 /// Generated protobuf and tonic code for `proto/physnap/v1/jobs.proto`.
 #[allow(missing_docs, clippy::all)]
@@ -150,49 +150,51 @@ fn job_msg(j: &JobView) -> pb::Job {
     }
 }
 
-/// The domain input of a proto spec.
-pub fn input_of(spec: pb::JobSpec) -> JobInput {
-    use pb::job_spec::Points;
-    JobInput {
-        points: spec.points.map(|p| match p {
-            Points::Xyz(f) => PointsInput::Flat(f.values),
-            Points::XyzF32le(b) => PointsInput::F32Le(b),
-            Points::Ply(b) => PointsInput::Ply(b),
-            Points::Npy(b) => PointsInput::Npy(b),
-        }),
-        category: Some(spec.category).filter(|c| !c.is_empty()),
-        w_pc: spec.w_pc,
-        w_pen: spec.w_pen,
-        w_mob: spec.w_mob,
-        n_g: spec.n_g,
-        tau: spec.tau,
-        guidance_max_step: spec.guidance_max_step,
-        refine_steps: spec.refine_steps,
-        refine_physics_steps: spec.refine_physics_steps,
-        sampler: Some(spec.sampler).filter(|s| !s.is_empty()),
-        eta: spec.eta,
-        steps: spec.steps,
-        seed: spec.seed,
-        samples: spec.samples,
-        deadline_seconds: spec.deadline_seconds,
-        preview_every: spec.preview_every,
-        resolution: spec.resolution,
-        retrieval: Some(spec.retrieval).filter(|s| !s.is_empty()),
-        category_guidance: spec.category_guidance,
-        category_guidance_below: spec.category_guidance_below,
-        joint_motion: Some(spec.joint_motion).filter(|s| !s.is_empty()),
-        // A repeated field: errors name the j-th camera `camera[j]`.
-        camera: (!spec.camera.is_empty())
-            .then(|| CameraInput::Many(spec.camera.iter().map(|c| vec![c.x, c.y, c.z]).collect())),
-        w_free: spec.w_free,
-        repair: Some(spec.repair).filter(|s| !s.is_empty()),
-        scale: Some(spec.scale).filter(|s| !s.is_empty()),
-        frame: Some(spec.frame).filter(|s| !s.is_empty()),
-        up: spec.up.map(|u| [u.x, u.y, u.z]),
-        // Protobuf types every field: nothing is refused for its type.
-        refused: Vec::new(),
+/// A proto field as a knob of [`JobInput`]: proto3 `optional` scalars are `Option`s already,
+/// and an empty `string` is "not given".
+trait ProtoKnob<T> {
+    fn knob(self) -> Option<T>;
+}
+
+impl<T> ProtoKnob<T> for Option<T> {
+    fn knob(self) -> Option<T> {
+        self
     }
 }
+
+impl ProtoKnob<String> for String {
+    fn knob(self) -> Option<String> {
+        Some(self).filter(|s| !s.is_empty())
+    }
+}
+
+/// Defines [`input_of`] from the knob list: it does not compile unless the proto's `JobSpec`
+/// has every knob, with a type that reads as the knob's.
+macro_rules! proto_input {
+    ($($(#[doc = $doc:literal])* $name:ident: $ty:ty,)*) => {
+        /// The domain input of a proto spec.
+        pub fn input_of(spec: pb::JobSpec) -> JobInput {
+            use pb::job_spec::Points;
+            JobInput {
+                points: spec.points.map(|p| match p {
+                    Points::Xyz(f) => PointsInput::Flat(f.values),
+                    Points::XyzF32le(b) => PointsInput::F32Le(b),
+                    Points::Ply(b) => PointsInput::Ply(b),
+                    Points::Npy(b) => PointsInput::Npy(b),
+                }),
+                $($name: ProtoKnob::<$ty>::knob(spec.$name),)*
+                // A repeated field: errors name the j-th camera `camera[j]`.
+                camera: (!spec.camera.is_empty()).then(|| {
+                    CameraInput::Many(spec.camera.iter().map(|c| vec![c.x, c.y, c.z]).collect())
+                }),
+                up: spec.up.map(|u| [u.x, u.y, u.z]),
+                // Protobuf types every field: nothing is refused for its type.
+                refused: Vec::new(),
+            }
+        }
+    };
+}
+request_knobs!(proto_input);
 
 impl GrpcJobs {
     fn tenant<T>(&self, req: &Request<T>) -> Result<String, Status> {

@@ -7,8 +7,8 @@
 //! `preview_every` steps, a light x̂₀ preview (part boxes and joints).
 //!
 //! Guidance (PhysNAP, method.md §8): the job's cloud and weights become a
-//! [`GuidanceOptions`] (n_g converted from "last n_g reverse steps" to the engine's "t < n_g"
-//! by [`JobSpec::guidance_threshold`]), the trained shape decoder is the part SDF the losses
+//! [`GuidanceOptions`] (n_g is the engine's: steps with diffusion time t < n_g are guided),
+//! the trained shape decoder is the part SDF the losses
 //! query, and the spec's sampler and step count pick the engine's reverse-step rule. All
 //! weights 0 samples unguided (plain NAP). The job's cameras add ℓ_free at `w_free`; with
 //! `repair` on (the default) the engine repairs the joints and removes the parts the scan does
@@ -205,7 +205,7 @@ fn preview_of(obj: &ArticulatedObject) -> Preview {
 
 /// The engine's guidance of a spec: None when no loss guides it and it has no camera (a camera
 /// alone still tells the part removal which space the scan saw through).
-pub fn guidance_of(spec: &JobSpec, schedule_steps: usize) -> Option<GuidanceOptions> {
+pub fn guidance_of(spec: &JobSpec) -> Option<GuidanceOptions> {
     (spec.guided() || !spec.cameras.is_empty()).then(|| {
         GuidanceOptions {
             points: spec.points.clone(),
@@ -214,7 +214,7 @@ pub fn guidance_of(spec: &JobSpec, schedule_steps: usize) -> Option<GuidanceOpti
             w_mob: spec.w_mob,
             cameras: Vec::new(),
             w_free: 0.0,
-            steps: spec.guidance_threshold(schedule_steps),
+            steps: spec.n_g as usize,
             tau: spec.tau,
             max_step: spec.guidance_max_step,
             refine_steps: spec.refine_steps as usize,
@@ -260,7 +260,7 @@ fn ranking_json(spec: &JobSpec, guidance: &Option<GuidanceOptions>, rows: &[Rank
         "guidance": guidance.as_ref().map(|g| serde_json::json!({
             "w_pc": g.w_pc, "w_pen": g.w_pen, "w_mob": g.w_mob, "w_free": g.w_free,
             "cameras": g.cameras,
-            "n_g": spec.n_g, "guided_below_t": g.steps, "tau": g.tau,
+            "n_g": g.steps, "tau": g.tau,
             "max_step": g.max_step, "refine_steps": g.refine_steps,
             "refine_physics_steps": g.refine_physics_steps,
         })),
@@ -308,7 +308,7 @@ pub fn run_job(
 ) -> Result<JobOutput, RunError> {
     let m = &models.loaded;
     let scales = &m.manifest.feature_scales;
-    let guidance = guidance_of(spec, models.schedule.len());
+    let guidance = guidance_of(spec);
     let req = GenerateRequest {
         seed: spec.seed,
         samples: 1,

@@ -18,7 +18,7 @@ use crate::engine::sample::Sampler;
 use crate::engine::sample::{
     DEFAULT_STEPS, MAX_CATEGORY_GUIDANCE, category_guidance, category_guidance_below,
 };
-use crate::engine::schedule::{NUM_STEPS, timesteps};
+use crate::engine::schedule::NUM_STEPS;
 use crate::pointcloud::{Format, Limits as CloudLimits, PointCloud, PointCloudError};
 
 /// The raw point-cloud payload, as it arrived.
@@ -64,75 +64,132 @@ impl CameraInput {
     }
 }
 
-/// A job request in transport-neutral form: every optional knob is `None` when not given.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct JobInput {
-    /// The partial point cloud (required).
-    pub points: Option<PointsInput>,
-    /// Category name (case-insensitive; NAP or PartNet-Mobility spelling).
-    pub category: Option<String>,
-    /// Point-cloud guidance weight.
-    pub w_pc: Option<f64>,
-    /// Penetration guidance weight.
-    pub w_pen: Option<f64>,
-    /// Mobility guidance weight.
-    pub w_mob: Option<f64>,
-    /// n_g: how many of the final reverse steps are guided.
-    pub n_g: Option<u32>,
-    /// τ: temperature of the soft point-to-part correspondence in ℓ_pc.
-    pub tau: Option<f64>,
-    /// Clamp of each guidance-gradient entry (model space; off when absent).
-    pub guidance_max_step: Option<f64>,
-    /// Refinement steps after sampling (default [`DEFAULT_REFINE_STEPS`]; 0: off).
-    pub refine_steps: Option<u32>,
-    /// Physics-only refinement steps after the refinement steps: ℓ_pen and ℓ_mob alone, part
-    /// boxes only (default [`DEFAULT_REFINE_PHYSICS_STEPS`]; 0: off).
-    pub refine_physics_steps: Option<u32>,
-    /// Sampler name (`ddpm` or `ddim`).
-    pub sampler: Option<String>,
-    /// DDIM noise level η (only with `ddim`).
-    pub eta: Option<f64>,
-    /// Reverse steps.
-    pub steps: Option<u32>,
-    /// Seed of sample 0.
-    pub seed: Option<u64>,
-    /// Best-of-N.
-    pub samples: Option<u32>,
-    /// Seconds from submission until the job fails with `deadline-exceeded`.
-    pub deadline_seconds: Option<f64>,
-    /// x̂₀ preview every this many steps (0 = never).
-    pub preview_every: Option<u32>,
-    /// Marching-cubes grid resolution.
-    pub resolution: Option<u32>,
-    /// Codebook retrieval of part shapes (`auto`, `off`, `empty`, `all`, `category`).
-    pub retrieval: Option<String>,
-    /// Classifier-free category guidance w (with a category only).
-    pub category_guidance: Option<f64>,
-    /// Apply the category guidance only in steps with diffusion time t below this (1-1000).
-    pub category_guidance_below: Option<u32>,
-    /// Joint motions of the result: `screw` or `dominant` (see [`JobSpec::joint_motion`]).
-    pub joint_motion: Option<String>,
-    /// Sensor position(s) the scan was taken from (object frame, metres).
-    pub camera: Option<CameraInput>,
-    /// Weight of the free-space loss ℓ_free (default [`DEFAULT_W_FREE`] with a camera, 0
-    /// without).
-    pub w_free: Option<f64>,
-    /// Joint repair and part removal: `on` (default) or `off`.
-    pub repair: Option<String>,
-    /// Scale hypothesis: `auto` (default: the scan is scaled so its box diagonal is the
-    /// category's typical procedural size, at most ×/÷ 4, and the result scaled back), `off`, or
-    /// a factor such as `"2.5"` (1/16–16).
-    pub scale: Option<String>,
-    /// The scan's frame: `canonical` (default: physnap's frame, +Z up, front −X, floor z = 0)
-    /// or `auto` (any right-handed metric frame with up `up`: floor, yaw and position are
-    /// estimated at submission, the model is returned in the scan's frame).
-    pub frame: Option<String>,
-    /// The scan's up direction with `frame: auto` (default [0, 0, 1]).
-    pub up: Option<[f64; 3]>,
-    /// What the transport could not read (a value of the wrong type, undecodable base64), each
-    /// field taken out of the input: [`validate`] lists these first and checks the rest.
-    pub refused: Vec<Violation>,
+/// Hands the request's plain knobs to the macro `$then`, as `/// doc` `name: type,` items. These
+/// are every field of a job request except the point cloud, the cameras and `up`, whose wire
+/// forms differ by transport.
+///
+/// This is the one list of them: [`JobInput`], the REST body and query parameters
+/// (`api::JobRequest`, `api::UploadParams`) and the gRPC conversion (`grpc::input_of`, which
+/// does not compile unless the proto's `JobSpec` has every knob) are generated from it. A new
+/// knob is one line here plus its rule in `spec/check.rs`, its proto field and, where it is
+/// stored, the store's document.
+macro_rules! request_knobs {
+    ($then:ident) => {
+        $then! {
+            /// Category (see `/v1/categories`; NAP or PartNet-Mobility spelling, any case);
+            /// absent = unconditional.
+            category: String,
+            /// Point-cloud loss weight ℓ_pc (>= 0). Default: the paper's 45 ÷ active terms (15).
+            w_pc: f64,
+            /// Penetration loss weight ℓ_pen (>= 0). Default: physnap's 3 × the paper's 2 ÷
+            /// active terms (2 with all three terms); 0 turns it off.
+            w_pen: f64,
+            /// Mobility loss weight ℓ_mob (>= 0). Default: physnap's 3 × the paper's 2 ÷ active
+            /// terms (2 with all three terms); 0 turns it off.
+            w_mob: f64,
+            /// n_g, as in the paper: the reverse steps with diffusion time t < n_g are guided
+            /// (0-1000; default 500, the paper's; 0 = none, 1000 = every step).
+            n_g: u32,
+            /// τ: temperature of the soft point-to-part correspondence in ℓ_pc (finite, > 0;
+            /// default 1000).
+            tau: f64,
+            /// Clamp each guidance-gradient entry to ±this (model space; finite, >= 0; default
+            /// 0.02). A deviation from the paper's raw gradient, which diverges with the shipped
+            /// weights; 0 = off (the paper's raw step).
+            guidance_max_step: f64,
+            /// Refinement steps after sampling (physnap, not in the paper): small clamped
+            /// gradient steps on the guidance loss of the finished sample (0-1000; default 30;
+            /// 0 = off, the paper).
+            refine_steps: u32,
+            /// Physics-only refinement steps after the refinement steps: ℓ_pen and ℓ_mob alone,
+            /// part boxes only (0-1000; default 0 = off). They run only when `w_pen` or `w_mob`
+            /// is > 0.
+            refine_physics_steps: u32,
+            /// Sampler: `ddim` (default) or `ddpm` (NAP's; strided ancestral with fewer steps).
+            /// The paper's sampler is `ddpm` with 1000 steps.
+            sampler: String,
+            /// DDIM noise level η in [0, 1] (default 0); only with `sampler` `ddim` (the
+            /// default).
+            eta: f64,
+            /// Reverse steps, 1–1000 (default 200; 1000 is the full schedule).
+            steps: u32,
+            /// Seed of sample 0; absent = random, echoed in `request.seed`.
+            seed: u64,
+            /// Best-of-N samples (1–16).
+            samples: u32,
+            /// Seconds from submission until the job fails with `deadline-exceeded`.
+            deadline_seconds: f64,
+            /// Attach an x̂₀ preview to every this many steps' progress (0 = never).
+            preview_every: u32,
+            /// Marching-cubes resolution (8–128, default 32).
+            resolution: u32,
+            /// Replace part shapes by their nearest training code of the weights' codebook:
+            /// `auto` (default: `empty` when the weights have a codebook, else `off`), `off`,
+            /// `empty` (shapes that mesh empty), `all` (NAP's retrieval variant) or `category`
+            /// (with a category: every part takes the nearest code of that category's training
+            /// parts).
+            retrieval: String,
+            /// Classifier-free category guidance w in [0, 20] (jobs with a category only):
+            /// ε̂ = ε̂(c) + w·(ε̂(c) − ε̂(∅)); 0 = plain conditioning. Default 0 for a
+            /// scan-guided job (w = 2 completed scans further from the scanned object), 2
+            /// without loss guidance (all weights 0).
+            category_guidance: f64,
+            /// Apply the category guidance only in reverse steps with diffusion time t below
+            /// this, 1-1000; 1000 = every step, the default for a scan-guided job. Default 500
+            /// without loss guidance (all weights 0): above t = 500 the guidance bought no
+            /// category accuracy there, only larger objects with more parts, and those steps
+            /// take one denoiser forward instead of two.
+            category_guidance_below: u32,
+            /// Joint motions of the result: `screw` (NAP: each joint keeps its rotation and
+            /// translation ranges; URDF screws need a helper link) or `dominant` (each joint
+            /// keeps only the wider range, in units of the model's feature scales: plain
+            /// revolute and prismatic joints). Default `dominant`.
+            joint_motion: String,
+            /// Free-space loss weight ℓ_free (>= 0). Default: 15 (ℓ_pc's) with a camera; 0
+            /// without one (a weight given without a camera is ignored).
+            w_free: f64,
+            /// Joint repair and part removal: `on` (default: hinges onto their part's edge or
+            /// centre line, axes snapped to box axes, children attached, parts the scan does not
+            /// allow removed (empty, in the cameras' free space, floating); listed in
+            /// `object.json` and `ranking.json`) or `off` (the raw projection).
+            repair: String,
+            /// Scale hypothesis: `auto` (default: the scan is scaled so its box diagonal is the
+            /// category's typical procedural size, at most ×/÷ 4, and the result scaled back),
+            /// `off`, or a factor such as `"2.5"` (1/16–16).
+            scale: String,
+            /// The scan's frame: `canonical` (default: physnap's frame, +Z up, front −X, floor
+            /// z = 0) or `auto` (any right-handed metric frame whose up is `up`: the floor, yaw
+            /// and position are estimated at submission; `object.json`, the URDF's `world`
+            /// link, the MJCF root and the GLB root node put the model back in the scan's
+            /// frame).
+            frame: String,
+        }
+    };
 }
+pub(crate) use request_knobs;
+
+/// Defines [`JobInput`] from the knob list.
+macro_rules! job_input {
+    ($($(#[doc = $doc:literal])* $name:ident: $ty:ty,)*) => {
+        /// A job request in transport-neutral form: every optional knob is `None` when not
+        /// given. The knobs are [`request_knobs`]'s.
+        #[derive(Debug, Clone, PartialEq, Default)]
+        pub struct JobInput {
+            /// The partial point cloud (required).
+            pub points: Option<PointsInput>,
+            $($(#[doc = $doc])* pub $name: Option<$ty>,)*
+            /// Sensor position(s) the scan was taken from (object frame, metres).
+            pub camera: Option<CameraInput>,
+            /// The scan's up direction with `frame: auto` (default [0, 0, 1]).
+            pub up: Option<[f64; 3]>,
+            /// What the transport could not read (a value of the wrong type, undecodable
+            /// base64), each field taken out of the input: [`validate`] lists these first and
+            /// checks the rest.
+            pub refused: Vec<Violation>,
+        }
+    };
+}
+request_knobs!(job_input);
 
 /// Most cameras of a job (the engine's limit).
 pub use crate::engine::free_space::MAX_CAMERAS;
@@ -200,7 +257,7 @@ pub struct ModelCaps {
 
 /// A validated job. Invariants: 16..=100k finite points (per [`Limits`]), a known category for
 /// a conditional model, finite non-negative weights, `sampler` `ddpm` or `ddim` (η ∈ [0, 1],
-/// 0 for `ddpm`), `steps` in 1..=schedule, `n_g ≤ steps`, τ finite and > 0, 1..=max samples, a
+/// 0 for `ddpm`), `steps` in 1..=schedule, `n_g ≤ schedule`, τ finite and > 0, 1..=max samples, a
 /// positive finite deadline, at most 16 finite cameras outside the points' box (`w_free` 0
 /// without one), and guidance the engine accepts ([`GuidanceOptions::validate`]).
 #[derive(Debug, Clone, PartialEq)]
@@ -215,8 +272,8 @@ pub struct JobSpec {
     pub w_pen: f64,
     /// Mobility loss weight.
     pub w_mob: f64,
-    /// n_g: the last this many of the `steps` reverse steps are guided (see
-    /// [`JobSpec::guidance_threshold`] for the engine's diffusion-time form).
+    /// n_g, as in the paper and the engine: the reverse steps with diffusion time t < n_g are
+    /// guided (0..=schedule).
     pub n_g: u32,
     /// τ: temperature of the soft point-to-part correspondence in ℓ_pc.
     pub tau: f64,
@@ -281,19 +338,6 @@ impl JobSpec {
             self.w_free,
             &self.cameras,
         )
-    }
-
-    /// n_g in the engine's form: guidance applies for diffusion time t < this. The reverse
-    /// steps visit `timesteps(schedule_steps, steps)` (descending); guiding the last `n_g` of
-    /// them means t < (the time of the n_g-th last step) + 1.
-    pub fn guidance_threshold(&self, schedule_steps: usize) -> usize {
-        let times = timesteps(schedule_steps, self.steps as usize);
-        let n = (self.n_g as usize).min(times.len());
-        if n == 0 {
-            0
-        } else {
-            times[times.len() - n] + 1
-        }
     }
 }
 

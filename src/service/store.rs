@@ -18,6 +18,7 @@ use serde::{Deserialize, Serialize};
 use super::spec::JobSpec;
 use crate::engine::generate::{JointMotion, RepairMode, Retrieval};
 use crate::engine::sample::Sampler;
+use crate::engine::schedule::{NUM_STEPS, timesteps};
 
 /// Errors of the store layer.
 #[derive(Debug, thiserror::Error)]
@@ -160,7 +161,13 @@ struct SpecDoc {
     w_pc: f64,
     w_pen: f64,
     w_mob: f64,
-    n_g: u32,
+    /// n_g as in the paper: the steps with diffusion time t < this are guided.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    n_g_t: Option<u32>,
+    /// Rows written before n_g had the paper's meaning hold it as a count: the last this many
+    /// of the `steps` reverse steps were guided ([`threshold_of_final_steps`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    n_g: Option<u32>,
     tau: f64,
     #[serde(default)]
     guidance_max_step: Option<f64>,
@@ -209,6 +216,19 @@ struct SpecDoc {
     frame: Option<([f64; 3], f64, [f64; 3])>,
 }
 
+/// The diffusion-time threshold that guides exactly the last `last` of `steps` reverse steps
+/// over the schedule: t < (the time of the `last`-th last step) + 1. How rows stored with
+/// n_g as a count of final steps are read.
+fn threshold_of_final_steps(steps: u32, last: u32) -> u32 {
+    let times = timesteps(NUM_STEPS, steps as usize);
+    let n = (last as usize).min(times.len());
+    if n == 0 {
+        0
+    } else {
+        (times[times.len() - n] + 1) as u32
+    }
+}
+
 fn repair_off() -> String {
     RepairMode::Off.as_str().into()
 }
@@ -218,7 +238,7 @@ fn joint_motion_screw() -> String {
 }
 
 fn every_step() -> u32 {
-    crate::engine::schedule::NUM_STEPS as u32
+    NUM_STEPS as u32
 }
 
 fn retrieval_off() -> String {
@@ -231,7 +251,8 @@ fn spec_to_row(s: &JobSpec) -> (String, Vec<u8>) {
         w_pc: s.w_pc,
         w_pen: s.w_pen,
         w_mob: s.w_mob,
-        n_g: s.n_g,
+        n_g_t: Some(s.n_g),
+        n_g: None,
         tau: s.tau,
         guidance_max_step: s.guidance_max_step,
         refine_steps: s.refine_steps,
@@ -285,6 +306,11 @@ fn spec_from_row(id: &str, json: &str, blob: &[u8]) -> Result<JobSpec, StoreErro
         .ok_or_else(|| corrupt(format!("unknown joint motion {:?}", d.joint_motion)))?;
     let repair = RepairMode::parse(&d.repair)
         .ok_or_else(|| corrupt(format!("unknown repair mode {:?}", d.repair)))?;
+    let n_g = match (d.n_g_t, d.n_g) {
+        (Some(t), _) => t,
+        (None, Some(last)) => threshold_of_final_steps(d.steps, last),
+        (None, None) => return Err(corrupt("no n_g".into())),
+    };
     Ok(JobSpec {
         points: blob
             .chunks_exact(12)
@@ -294,7 +320,7 @@ fn spec_from_row(id: &str, json: &str, blob: &[u8]) -> Result<JobSpec, StoreErro
         w_pc: d.w_pc,
         w_pen: d.w_pen,
         w_mob: d.w_mob,
-        n_g: d.n_g,
+        n_g,
         tau: d.tau,
         guidance_max_step: d.guidance_max_step,
         refine_steps: d.refine_steps,
@@ -608,6 +634,15 @@ mod tests {
         assert_eq!(spec.category_guidance_below, 1000);
         assert_eq!(spec.joint_motion, JointMotion::Screw);
         assert_eq!(spec.refine_physics_steps, 0);
+        // n_g was then a count of final steps: the last 200 of 200 steps guided is every step
+        // (t < 1000); the threshold read for any count guides exactly that many steps.
+        assert_eq!(spec.n_g, 1000);
+        for last in [0, 1, 7, 100, 200] {
+            let old = json.replace(r#""n_g":200"#, &format!(r#""n_g":{last}"#));
+            let t = spec_from_row("j", &old, &[]).unwrap().n_g as usize;
+            let guided = timesteps(NUM_STEPS, 200).into_iter().filter(|&s| s < t);
+            assert_eq!(guided.count(), last as usize, "{last}: t < {t}");
+        }
         // And a spec round-trips through its row unchanged.
         let (json, blob) = spec_to_row(&JobSpec {
             refine_physics_steps: 7,

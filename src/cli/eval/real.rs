@@ -581,7 +581,7 @@ fn job(
         let why = samples
             .iter()
             .take(n)
-            .find_map(|s| s.outcome.as_ref().err().cloned())
+            .find_map(|s| s.outcome.as_ref().err().map(ToString::to_string))
             .unwrap_or_else(|| "no sample".into());
         r.error = Some(format!("every sample failed (first: {why})"));
         r.seconds = drawn;

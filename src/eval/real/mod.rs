@@ -138,7 +138,7 @@ pub struct JobSample {
     /// Wall time of this sample (sampling + meshing + D_pc), seconds.
     pub seconds: f64,
     /// The sample, or why there is none (diverged, projection failed, ...).
-    pub outcome: Result<Generated, String>,
+    pub outcome: Result<Generated, EngineError>,
 }
 
 /// Draw `n` samples of `req` one by one (sample k with seed `req.seed + k`, as `generate`),
@@ -182,7 +182,14 @@ pub fn draw_samples(
                 );
                 (Ok(g), (terms.d_pc, terms.score()))
             }
-            Ok(_) => (Err("no sample returned".to_string()), (f64::NAN, f64::NAN)),
+            Ok(_) => (
+                Err(EngineError::Invalid(crate::error::Invalid::new(
+                    "sample",
+                    "an object",
+                    "none returned",
+                ))),
+                (f64::NAN, f64::NAN),
+            ),
             Err(
                 e @ (EngineError::Invalid(crate::error::Invalid { .. })
                 | EngineError::Stopped { .. }),
@@ -190,12 +197,12 @@ pub fn draw_samples(
                 // A projection failure is the sample's; other invalid options are the run's.
                 if matches!(&e, EngineError::Invalid(crate::error::Invalid { field, .. }) if field == "sample")
                 {
-                    (Err(e.to_string()), (f64::NAN, f64::NAN))
+                    (Err(e), (f64::NAN, f64::NAN))
                 } else {
                     return Err(e.into());
                 }
             }
-            Err(e) => (Err(e.to_string()), (f64::NAN, f64::NAN)),
+            Err(e) => (Err(e), (f64::NAN, f64::NAN)),
         };
         out.push(JobSample {
             index: k,
@@ -545,7 +552,11 @@ mod tests {
             d_pc: f64::NAN,
             score: f64::NAN,
             seconds: 1.0,
-            outcome: Err("diverged".into()),
+            outcome: Err(EngineError::Diverged {
+                step: 1,
+                t: 999,
+                what: "x",
+            }),
         };
         // No sample produced an object: no best.
         assert_eq!(best_of(&[failed(0), failed(1)], 2), None);

@@ -162,7 +162,7 @@ pub fn validate(
     let scale = found.take(scale_mode(input));
     let sampler = found.take(sampler(input));
     let steps = found.take(steps(input, caps));
-    let n_g = steps.and_then(|s| found.take(n_g(input, caps, s)));
+    let n_g = found.take(n_g(input, caps));
     let tau = found.take(tau(input));
     let guidance_max_step = found.take(guidance_max_step(input));
     let refine_steps = found.take(at_most_refine_steps(
@@ -296,7 +296,7 @@ pub fn validate(
     };
     // The engine's own checks of the guidance the job will run with (the cameras' count,
     // range and place outside the points' box among them), at submission rather than at run.
-    if let Some(g) = super::super::runner::guidance_of(&spec, caps.schedule_steps as usize) {
+    if let Some(g) = super::super::runner::guidance_of(&spec) {
         g.validate(caps.schedule_steps as usize)
             .map_err(|e| engine_violation(e, input.camera.as_ref()))?;
     }
@@ -457,16 +457,21 @@ fn steps(input: &JobInput, caps: &ModelCaps) -> Result<u32, Violation> {
     Ok(steps)
 }
 
-/// The paper's n_g = 500 of T = 1000 steps, scaled to the steps asked for: the same share of
-/// the run as the CLI's `--guidance-steps 500` (t < 500) guides with `--steps`.
-fn n_g(input: &JobInput, caps: &ModelCaps, steps: u32) -> Result<u32, Violation> {
-    let n_g = input.n_g.unwrap_or_else(|| {
-        ((DEFAULT_GUIDED_STEPS as f64 * steps as f64 / caps.schedule_steps.max(1) as f64).round()
-            as u32)
-            .min(steps)
-    });
-    if n_g > steps {
-        return Err(violation("n_g", format!("<= steps ({steps})"), n_g));
+/// n_g as in the paper: the steps with diffusion time t < n_g are guided, 0..=the schedule's
+/// length (default the paper's 500, or the whole schedule when it is shorter).
+fn n_g(input: &JobInput, caps: &ModelCaps) -> Result<u32, Violation> {
+    let n_g = input
+        .n_g
+        .unwrap_or((DEFAULT_GUIDED_STEPS as u32).min(caps.schedule_steps));
+    if n_g > caps.schedule_steps {
+        return Err(violation(
+            "n_g",
+            format!(
+                "<= {} (diffusion steps of the schedule)",
+                caps.schedule_steps
+            ),
+            n_g,
+        ));
     }
     Ok(n_g)
 }

@@ -1,6 +1,7 @@
 //! Tests of `spec`.
 
 use super::*;
+use crate::engine::schedule::timesteps;
 
 /// [`super::validate`] for a request with at most one defect: the one violation it reports
 /// (the tests below each break one rule; [`every_violation_is_listed`] breaks several).
@@ -87,9 +88,9 @@ fn accepts_defaults_and_materialises_the_seed() {
         ..Default::default()
     };
     let s = validate(&input, &caps(), &Limits::default(), 77).unwrap();
-    // physnap's fast default: DDIM over 200 steps, the last 100 guided (t < 500, as the
-    // paper's n_g = 500 of 1000), with the gradient clamp.
-    assert_eq!((s.seed, s.samples, s.steps, s.n_g), (77, 1, 200, 100));
+    // physnap's fast default: DDIM over 200 steps, those with t < 500 guided (the paper's
+    // n_g = 500), with the gradient clamp.
+    assert_eq!((s.seed, s.samples, s.steps, s.n_g), (77, 1, 200, 500));
     assert_eq!(
         (s.tau, s.sampler.name(), s.sampler.eta()),
         (1000.0, "ddim", 0.0)
@@ -100,12 +101,9 @@ fn accepts_defaults_and_materialises_the_seed() {
     assert_eq!(s.refine_physics_steps, 0);
     assert_eq!((s.w_pc, s.w_pen, s.w_mob), (15.0, 2.0, 2.0));
     assert!(s.guided());
-    // Exactly the last 100 of the 200 strided times are guided, as with the CLI's
-    // `--guidance-steps 500` (t < 500).
-    let th = s.guidance_threshold(1000);
+    // That is the last 100 of the 200 strided times, as with the CLI's `--n-g 500`.
     let times = timesteps(1000, 200);
-    assert_eq!(times.iter().filter(|&&t| t < th).count(), 100);
-    assert_eq!(times.iter().filter(|&&t| t < 500).count(), 100);
+    assert_eq!(times.iter().filter(|&&t| t < s.n_g as usize).count(), 100);
     assert_eq!(s.points.len(), 16);
     // The paper's sampler is one field away.
     let paper = JobInput {
@@ -115,7 +113,6 @@ fn accepts_defaults_and_materialises_the_seed() {
     };
     let s = validate(&paper, &caps(), &Limits::default(), 77).unwrap();
     assert_eq!((s.steps, s.n_g, s.sampler), (1000, 500, Sampler::Ddpm));
-    assert_eq!(s.guidance_threshold(1000), 500);
 }
 
 #[test]
@@ -216,7 +213,7 @@ fn weight_defaults_follow_the_papers_rule_for_the_active_terms() {
 }
 
 #[test]
-fn n_g_scales_with_steps_and_guides_the_last_n_g_reverse_steps() {
+fn n_g_is_the_papers_threshold_on_diffusion_time_whatever_the_steps() {
     let input = JobInput {
         points: Some(cloud(16)),
         sampler: Some("ddim".into()),
@@ -225,7 +222,7 @@ fn n_g_scales_with_steps_and_guides_the_last_n_g_reverse_steps() {
         ..Default::default()
     };
     let s = validate(&input, &caps(), &Limits::default(), 0).unwrap();
-    assert_eq!((s.steps, s.n_g), (20, 10));
+    assert_eq!((s.steps, s.n_g), (20, 500));
     // The gradient clamp is on by default; 0 asks for the paper's raw step.
     assert_eq!(s.guidance_max_step, Some(DEFAULT_MAX_STEP));
     let raw = JobInput {
@@ -235,22 +232,22 @@ fn n_g_scales_with_steps_and_guides_the_last_n_g_reverse_steps() {
     let raw = validate(&raw, &caps(), &Limits::default(), 0).unwrap();
     assert_eq!(raw.guidance_max_step, None);
     assert_eq!(s.sampler, Sampler::Ddim { eta: 0.5 });
-    // Exactly the last n_g of the strided times fall below the threshold, and that is
-    // the CLI's `--guidance-steps 500` for the default.
-    for n_g in [0, 1, 7, 10, 20] {
-        let s = JobSpec { n_g, ..s.clone() };
-        let th = s.guidance_threshold(1000);
-        let guided = timesteps(1000, 20).into_iter().filter(|&t| t < th).count();
-        assert_eq!(guided, n_g as usize, "n_g {n_g}");
+    // n_g goes to the engine as it is: t < n_g, any number of steps.
+    for n_g in [0, 1, 250, 1000] {
+        let i = JobInput {
+            n_g: Some(n_g),
+            ..input.clone()
+        };
+        let s = validate(&i, &caps(), &Limits::default(), 0).unwrap();
+        assert_eq!(s.n_g, n_g);
+        assert_eq!(
+            crate::service::runner::guidance_of(&s).unwrap().steps,
+            n_g as usize
+        );
     }
-    let cli = timesteps(1000, 20).into_iter().filter(|&t| t < 500).count();
-    assert_eq!(cli, 10);
-    let s = JobSpec {
-        n_g: 1000,
-        steps: 1000,
-        ..s
-    };
-    assert_eq!(s.guidance_threshold(1000), 1000);
+    // 10 of the 20 strided times are below the default 500.
+    let guided = timesteps(1000, 20).into_iter().filter(|&t| t < 500).count();
+    assert_eq!(guided, 10);
 }
 
 #[test]
@@ -292,10 +289,10 @@ fn each_limit_names_field_limit_and_value() {
     assert!(v.limit.contains("1..=1000"), "{v}");
     let v = bad(&|i| {
         i.steps = Some(20);
-        i.n_g = Some(21);
+        i.n_g = Some(1001);
     });
-    assert_eq!((v.field.as_str(), v.value.as_str()), ("n_g", "21"));
-    assert!(v.limit.contains("<= steps (20)"), "{v}");
+    assert_eq!((v.field.as_str(), v.value.as_str()), ("n_g", "1001"));
+    assert!(v.limit.contains("<= 1000"), "{v}");
     for (tau, shown) in [(0.0, "0"), (-1.0, "-1"), (f64::NAN, "NaN")] {
         let v = bad(&|i| i.tau = Some(tau));
         assert_eq!((v.field.as_str(), v.value.as_str()), ("tau", shown));
@@ -400,7 +397,7 @@ fn cameras_come_as_one_triple_or_a_list_and_set_w_free_and_repair_defaults() {
     assert_eq!(s.cameras, vec![[0.0, -3.0, 1.0], [20.0, 0.5, 2.0]]);
     assert_eq!((s.w_free, s.repair), (4.0, RepairMode::Off));
     // The engine runs what the spec says.
-    let g = crate::service::runner::guidance_of(&s, 1000).unwrap();
+    let g = crate::service::runner::guidance_of(&s).unwrap();
     assert_eq!((g.cameras.clone(), g.w_free), (s.cameras.clone(), 4.0));
     assert!(g.free_active());
     // Without a camera ℓ_free has nothing to look from: a given weight runs as 0, as with
@@ -432,7 +429,7 @@ fn cameras_come_as_one_triple_or_a_list_and_set_w_free_and_repair_defaults() {
     let s = validate(&free_only(0.0), &caps(), &l, 0).unwrap();
     assert!(!s.guided());
     assert_eq!(s.category_guidance, 2.0);
-    let g = crate::service::runner::guidance_of(&s, 1000).unwrap();
+    let g = crate::service::runner::guidance_of(&s).unwrap();
     assert!(!g.is_active());
     assert_eq!(g.cameras, s.cameras);
 }
@@ -641,8 +638,8 @@ fn frame_auto_is_estimated_at_submission_and_bad_frames_are_refused() {
 
 #[test]
 fn every_violation_is_listed() {
-    // Five defects in one request: all five are reported, in field order, and nothing about
-    // the fields that depend on a rejected one (n_g and preview_every on steps).
+    // Seven defects in one request: all are reported, in field order, and nothing about the
+    // fields that depend on a rejected one (preview_every on steps).
     let input = JobInput {
         points: Some(cloud(3)),
         category: Some("Spaceship".into()),
@@ -659,7 +656,15 @@ fn every_violation_is_listed() {
     let fields: Vec<&str> = all.iter().map(|v| v.field.as_str()).collect();
     assert_eq!(
         fields,
-        ["points", "category", "w_pc", "eta", "steps", "resolution"],
+        [
+            "points",
+            "category",
+            "w_pc",
+            "eta",
+            "steps",
+            "n_g",
+            "resolution"
+        ],
         "{all}"
     );
     assert_eq!(all.first().field, "points");

@@ -114,9 +114,9 @@ pub(crate) struct GenerateArgs {
         allow_hyphen_values = true
     )]
     pub(crate) up: String,
-    /// Quality preset: fast (50 reverse steps, 10 refinement steps, meshing resolution 24),
-    /// standard (the defaults below) or best (500 reverse steps, resolution 48, best of 4
-    /// samples). A flag or environment variable given explicitly wins over the preset.
+    /// Quality preset: fast (100 reverse steps, meshing resolution 24: about half the time),
+    /// standard (the defaults below) or best (best of 4 samples, ranked: about four times the
+    /// time). A flag or environment variable given explicitly wins over the preset.
     #[arg(long, env = "PHYSNAP_QUALITY", default_value = "standard", value_parser = ["fast", "standard", "best"])]
     pub(crate) quality: String,
     /// Sampler and guidance schedule.
@@ -124,15 +124,13 @@ pub(crate) struct GenerateArgs {
     pub(crate) sampling: SamplingArgs,
 }
 
-/// What a `--quality` preset sets: (reverse steps, refinement steps, meshing resolution,
-/// samples); None keeps the flag's default.
-pub(crate) fn quality_preset(
-    name: &str,
-) -> (Option<usize>, Option<usize>, Option<usize>, Option<usize>) {
+/// What a `--quality` preset sets: (reverse steps, meshing resolution, samples); None keeps
+/// the flag's default.
+fn quality_preset(name: &str) -> (Option<usize>, Option<usize>, Option<usize>) {
     match name {
-        "fast" => (Some(50), Some(10), Some(24), None),
-        "best" => (Some(500), None, Some(48), Some(4)),
-        _ => (None, None, None, None),
+        "fast" => (Some(100), Some(24), None),
+        "best" => (None, None, Some(4)),
+        _ => (None, None, None),
     }
 }
 
@@ -141,12 +139,9 @@ impl GenerateArgs {
     pub(crate) fn apply_quality(&mut self, matches: &clap::ArgMatches) {
         let default =
             |id: &str| matches.value_source(id) == Some(clap::parser::ValueSource::DefaultValue);
-        let (steps, refine, resolution, samples) = quality_preset(&self.quality);
+        let (steps, resolution, samples) = quality_preset(&self.quality);
         if let (Some(v), true) = (steps, default("steps")) {
             self.sampling.steps = v;
-        }
-        if let (Some(v), true) = (refine, default("guidance_refine_steps")) {
-            self.sampling.guidance_refine_steps = v;
         }
         if let (Some(v), true) = (resolution, default("resolution")) {
             self.resolution = v;
@@ -698,7 +693,7 @@ pub(crate) fn write_ranking(
         "ranked_by": "score = D_pc / scan diagonal + free-space share + attachment gap / object diagonal + O_mesh + sim contact depth / object diagonal (lower is better)",
         "guidance": {
             "w_pc": opts.w_pc, "w_pen": opts.w_pen, "w_mob": opts.w_mob, "w_free": opts.w_free,
-            "cameras": opts.cameras, "steps": opts.steps, "tau": opts.tau,
+            "cameras": opts.cameras, "n_g": opts.steps, "tau": opts.tau,
         },
         "best": best,
         "samples": ranked,

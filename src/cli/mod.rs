@@ -230,13 +230,20 @@ mod tests {
         };
         let standard = parse(&[]);
         assert_eq!(standard, parse(&["--quality", "standard"]));
-        assert_eq!(parse(&["--quality", "fast"]), (50, 10, 24, standard.3));
-        assert_eq!(parse(&["--quality", "best"]), (500, standard.1, 48, 4));
+        assert_eq!(
+            parse(&["--quality", "fast"]),
+            (100, standard.1, 24, standard.3)
+        );
+        assert_eq!(
+            parse(&["--quality", "best"]),
+            (standard.0, standard.1, standard.2, 4)
+        );
         // Explicit flags win, even when they equal the default.
         assert_eq!(
-            parse(&["--quality", "best", "--samples", "1", "--steps", "200"]),
-            (200, standard.1, 48, 1)
+            parse(&["--quality", "fast", "--resolution", "32", "--steps", "200"]),
+            (200, standard.1, 32, standard.3)
         );
+        assert_eq!(parse(&["--quality", "best", "--samples", "1"]), standard);
         let bad = Cli::command()
             .try_get_matches_from(["physnap", "generate", "--out", "o", "--quality", "max"])
             .unwrap_err()

@@ -71,8 +71,8 @@ pub struct EvalRealArgs {
     /// Views per object, the first ones by view index (0: all).
     #[arg(long, env = "PHYSNAP_REAL_VIEWS", default_value_t = 0)]
     views: usize,
-    /// Samples of the best-of row (the best by D_pc, as `generate --samples N` ranks them); 1
-    /// drops the row.
+    /// Samples of the best-of row (the best by the ranking score, as `generate --samples N`
+    /// ranks them); 1 drops the row.
     #[arg(long, env = "PHYSNAP_SAMPLES", default_value_t = 4)]
     samples: usize,
     /// Give the model the scan's category: yes (as `generate --category`), no, or both blocks.

@@ -9,9 +9,10 @@
 //! `io`'s part; nothing here touches files or serialisation.
 //!
 //! Rows: `prior` (unguided, one sample), `guided` (`generate --points`'s defaults, one sample)
-//! and `best-of-N` (the same guidance, N samples, the best by D_pc). Sample k of a scan's
-//! guided draws has seed `seed + k` in both guided rows, so `guided` is `best-of-N`'s sample 0
-//! and is drawn once. Each row runs with the scan's category (`category_aware`) or without.
+//! and `best-of-N` (the same guidance, N samples, the best by the ranking score of
+//! `eval::rank`). Sample k of a scan's guided draws has seed `seed + k` in both guided rows, so
+//! `guided` is `best-of-N`'s sample 0 and is drawn once. Each row runs with the scan's
+//! category (`category_aware`) or without.
 //!
 //! Failed jobs (every sample diverged or failed, no surface, an export MuJoCo could not load)
 //! count as misses in every share; in the Chamfer median a failed job counts as +∞.

@@ -448,6 +448,8 @@ fn a_camera_turns_on_free_space_and_ranking_json_lists_every_term() {
         serde_json::from_str(&std::fs::read_to_string(out.join("ranking.json")).unwrap()).unwrap();
     assert_eq!(r["guidance"]["w_free"], 15.0);
     assert_eq!(r["guidance"]["cameras"].as_array().unwrap().len(), 1);
+    // n_g as the paper (and REST, gRPC) mean it: t < 500 guided.
+    assert_eq!(r["guidance"]["n_g"], 500);
     let samples = r["samples"].as_array().unwrap();
     assert_eq!(samples.len(), 2);
     let scores: Vec<f64> = samples

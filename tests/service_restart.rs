@@ -1,6 +1,7 @@
 //! Durability: `kill -9` of a `physnap serve` child while a job runs, then a restart on the
-//! same data dir. The job must be re-run and finish exactly once, with the same artefact bytes
-//! as an uninterrupted run of the same request (fixed seed).
+//! same store. The job must be re-run and finish exactly once, with the same artefact bytes
+//! as an uninterrupted run of the same request (fixed seed). Run on the SQLite store (same data
+//! dir) and on PostgreSQL (the restarted server gets an empty data dir: nothing is on disk).
 
 mod support;
 
@@ -24,12 +25,14 @@ impl Drop for Child9 {
     }
 }
 
-fn spawn(root: &Path) -> Child9 {
+/// `physnap serve` with `--data-dir root/<data> --store <store>`.
+fn spawn_on(root: &Path, data: &str, store: &str) -> Child9 {
     let mut child = Command::new(env!("CARGO_BIN_EXE_physnap"))
         .args(["serve", "--http", "127.0.0.1:0", "--grpc", "127.0.0.1:0"])
         .args(["--admin", "127.0.0.1:0", "--worker-threads", "1"])
         .arg("--data-dir")
-        .arg(root.join("data"))
+        .arg(root.join(data))
+        .env("PHYSNAP_STORE", store)
         .arg("--weights")
         .arg(root.join("weights"))
         .env("PHYSNAP_LOG", "warn")
@@ -80,6 +83,21 @@ fn glb_sha(j: &Value) -> String {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn kill_9_mid_run_then_restart_finishes_once_with_same_bytes() {
+    kill_9_then_restart("sqlite", false).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn kill_9_mid_run_then_restart_on_postgres_finishes_once_with_same_bytes() {
+    let (_pg, url) = tokio::task::block_in_place(|| {
+        let pg = support::pg::Pg::start();
+        let url = pg.fresh_db("restart");
+        (pg, url)
+    });
+    kill_9_then_restart(&url, true).await;
+}
+
+/// `fresh_dir`: the restarted server gets a new, empty data directory.
+async fn kill_9_then_restart(store: &str, fresh_dir: bool) {
     let root = tempfile::tempdir().unwrap();
     tiny_weights(&root.path().join("weights"));
     let c = reqwest::Client::new();
@@ -88,7 +106,7 @@ async fn kill_9_mid_run_then_restart_finishes_once_with_same_bytes() {
                       "sampler": "ddpm", "steps": 1000,
                       "category": "Door", "w_pc": 0.0, "w_pen": 0.0, "w_mob": 0.0});
 
-    let server = spawn(root.path());
+    let server = spawn_on(root.path(), "data", store);
     let r = c
         .post(format!("http://{}/v1/jobs", server.http))
         .json(&body)
@@ -120,7 +138,7 @@ async fn kill_9_mid_run_then_restart_finishes_once_with_same_bytes() {
     drop(sse);
     drop(server); // kill -9 + wait
 
-    let server = spawn(root.path());
+    let server = spawn_on(root.path(), if fresh_dir { "data2" } else { "data" }, store);
     let url = format!("http://{}/v1/jobs/{id}", server.http);
     let job = wait_done(&c, &url).await;
     assert_eq!(job["state"], "SUCCEEDED", "{job:#}");
@@ -168,6 +186,11 @@ async fn kill_9_mid_run_then_restart_finishes_once_with_same_bytes() {
         .unwrap();
     use sha2::Digest as _;
     assert_eq!(format!("{:x}", sha2::Sha256::digest(&bytes)), glb_sha(&job));
+    if fresh_dir {
+        for data in ["data", "data2"] {
+            assert!(!root.path().join(data).join("artifacts").exists());
+        }
+    }
 }
 
 #[test]

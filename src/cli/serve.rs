@@ -9,6 +9,7 @@ use anyhow::Context;
 use clap::Args;
 use physnap::service::auth::Tenants;
 use physnap::service::server::{ServeConfig, Server};
+use physnap::service::store::StoreLocation;
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpStream};
 use std::path::PathBuf;
@@ -25,9 +26,18 @@ pub struct ServeArgs {
     /// Admin listen address (/metrics, /livez, /readyz); keep it off the gateway.
     #[arg(long, env = "PHYSNAP_ADMIN", default_value = "127.0.0.1:9000")]
     admin: SocketAddr,
-    /// Job store (SQLite) and artefacts.
+    /// Directory of the SQLite job store and its artefacts.
     #[arg(long, env = "PHYSNAP_DATA_DIR", default_value = "data")]
     data_dir: PathBuf,
+    /// Job store: `sqlite` (in --data-dir) or `postgres://user:password@host:port/db`
+    /// (jobs, events and artefacts in PostgreSQL; the schema is migrated at start).
+    #[arg(
+        long,
+        env = "PHYSNAP_STORE",
+        default_value = "sqlite",
+        hide_env_values = true
+    )]
+    store: StoreLocation,
     /// Weights directory with manifest.json.
     #[arg(long, env = "PHYSNAP_WEIGHTS", default_value = "weights")]
     weights: PathBuf,
@@ -86,6 +96,7 @@ pub fn serve(a: ServeArgs) -> anyhow::Result<()> {
         grpc: a.grpc,
         admin: a.admin,
         data_dir: a.data_dir,
+        store: a.store,
         weights: a.weights,
         max_running_jobs: a.max_running_jobs,
         worker_threads,
@@ -103,7 +114,7 @@ pub fn serve(a: ServeArgs) -> anyhow::Result<()> {
     };
     tracing::info!(
         http = %cfg.http, grpc = %cfg.grpc, admin = %cfg.admin,
-        data_dir = %cfg.data_dir.display(), weights = %cfg.weights.display(),
+        data_dir = %cfg.data_dir.display(), store = %cfg.store, weights = %cfg.weights.display(),
         max_running_jobs = cfg.max_running_jobs, worker_threads = cfg.worker_threads,
         queue_capacity = cfg.queue_capacity, max_body_bytes = cfg.max_body_bytes,
         job_timeout_s = cfg.job_timeout_seconds, drain_timeout_s = a.drain_timeout,

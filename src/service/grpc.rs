@@ -343,15 +343,11 @@ impl JobService for GrpcJobs {
                 ARTIFACT_NAMES.join(", ")
             )));
         }
-        let (path, a) = self
+        let (bytes, a) = self
             .svc
             .artifact(&tenant, &r.id, &r.name)
             .await
             .map_err(status_of)?;
-        let bytes = tokio::task::spawn_blocking(move || std::fs::read(path))
-            .await
-            .map_err(|e| Status::internal(e.to_string()))?
-            .map_err(|e| Status::internal(format!("reading artefact: {e}")))?;
         let n = bytes.len().div_ceil(CHUNK_BYTES).max(1);
         let chunks: Vec<Result<pb::ArtifactChunk, Status>> = (0..n)
             .map(|i| {

@@ -750,7 +750,7 @@ async fn get_artifact(
             Some(format!("/v1/jobs/{id}/artifacts")),
         ));
     }
-    let (path, a) = st.svc.artifact(&tenant, &id, &name).await.map_err(&err)?;
+    let (bytes, a) = st.svc.artifact(&tenant, &id, &name).await.map_err(&err)?;
     let etag = format!("\"{}\"", a.sha256);
     if headers
         .get(header::IF_NONE_MATCH)
@@ -758,10 +758,6 @@ async fn get_artifact(
     {
         return Ok(StatusCode::NOT_MODIFIED.into_response());
     }
-    let bytes = tokio::task::spawn_blocking(move || std::fs::read(path))
-        .await
-        .map_err(|e| err(ServiceError::Internal(e.to_string())))?
-        .map_err(|e| err(ServiceError::Internal(format!("reading artefact: {e}"))))?;
     Ok((
         [
             (header::CONTENT_TYPE, media_type(&name).to_string()),

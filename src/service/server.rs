@@ -23,6 +23,7 @@ use super::http::{HttpState, admin_router, router};
 use super::jobs::{Service, ServiceConfig, ServiceError};
 use super::runner::Models;
 use super::spec::Limits;
+use super::store::StoreLocation;
 use crate::engine::schedule::Schedule;
 
 /// Everything `serve` needs.
@@ -34,8 +35,10 @@ pub struct ServeConfig {
     pub grpc: SocketAddr,
     /// Admin listener (`/metrics`, `/livez`, `/readyz`).
     pub admin: SocketAddr,
-    /// SQLite store and artefacts.
+    /// The SQLite store and its artefacts.
     pub data_dir: PathBuf,
+    /// Where jobs and artefacts are stored.
+    pub store: StoreLocation,
     /// Weights directory (`manifest.json`).
     pub weights: PathBuf,
     /// Jobs running at once.
@@ -107,6 +110,7 @@ impl Server {
         let svc = Service::start(
             ServiceConfig {
                 data_dir: cfg.data_dir.clone(),
+                store: cfg.store.clone(),
                 max_running_jobs: cfg.max_running_jobs,
                 worker_threads: cfg.worker_threads,
                 queue_capacity: cfg.queue_capacity,
@@ -117,7 +121,8 @@ impl Server {
                 loaded,
                 schedule: Schedule::default(),
             },
-        )?;
+        )
+        .await?;
         let listeners = [
             TcpListener::bind(cfg.http)
                 .await

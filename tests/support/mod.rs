@@ -7,9 +7,12 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
 
+pub mod pg;
+
 use physnap::service::auth::Tenants;
 use physnap::service::jobs::Service;
 use physnap::service::server::{BoundAddrs, ServeConfig, Server};
+use physnap::service::store::StoreLocation;
 
 /// Write a tiny, randomly initialised (untrained) but real weights directory
 /// ([`physnap::fixtures::tiny_weights`]).
@@ -24,6 +27,7 @@ pub struct Opts {
     pub queue_capacity: usize,
     pub max_body_bytes: usize,
     pub tokens: String,
+    pub store: StoreLocation,
 }
 
 impl Default for Opts {
@@ -33,6 +37,7 @@ impl Default for Opts {
             queue_capacity: 8,
             max_body_bytes: 4 << 20,
             tokens: String::new(),
+            store: StoreLocation::Sqlite,
         }
     }
 }
@@ -73,6 +78,7 @@ pub fn serve_config(root: &Path, o: &Opts) -> ServeConfig {
         grpc: loopback(),
         admin: loopback(),
         data_dir: root.join("data"),
+        store: o.store.clone(),
         weights: root.join("weights"),
         max_running_jobs: o.max_running_jobs,
         worker_threads: 1,

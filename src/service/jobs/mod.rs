@@ -21,12 +21,11 @@
 //!   seed is part of the job, so the re-run writes the same bytes. Disconnects never cancel.
 
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
-use sha2::{Digest, Sha256};
 use tokio::sync::{Notify, OwnedSemaphorePermit, Semaphore, watch};
 
 use super::api::{self, JobList, JobView};
@@ -36,15 +35,20 @@ mod fanout;
 
 use super::runner::{Models, Progress, RunError, run_job};
 use super::spec::{JobInput, Limits, ModelCaps, Violation, Violations, validate};
-use super::store::{Artifact, JobFailure, JobRecord, JobState, Store, StoreError, StoredEvent};
+use super::store::{
+    self, Artifact, JobFailure, JobRecord, JobState, JobStore, StoreError, StoreLocation,
+    StoredEvent,
+};
 use fanout::Live;
 pub use fanout::{Snapshot, WatchItem};
 
 /// Settings of the job service.
 #[derive(Debug, Clone)]
 pub struct ServiceConfig {
-    /// SQLite file and artefacts live here.
+    /// The SQLite store (`jobs.sqlite3`, `artifacts/`) lives here.
     pub data_dir: PathBuf,
+    /// Where jobs and artefacts are stored.
+    pub store: StoreLocation,
     /// Jobs running at once.
     pub max_running_jobs: usize,
     /// Threads of the dedicated rayon pool.
@@ -183,7 +187,7 @@ pub struct Metrics {
 /// The job service.
 pub struct Service {
     cfg: ServiceConfig,
-    store: Arc<Mutex<Store>>,
+    store: Arc<Mutex<Box<dyn JobStore>>>,
     models: Arc<Models>,
     caps: ModelCaps,
     pool: Arc<rayon::ThreadPool>,
@@ -235,23 +239,22 @@ fn state_events(rec: &mut JobRecord) -> Vec<StoredEvent> {
     out
 }
 
-fn write_artifact(dir: &Path, name: &str, bytes: &[u8]) -> Result<Artifact, ServiceError> {
-    crate::export::write_atomic(&dir.join(name), bytes)
-        .map_err(|e| ServiceError::Internal(e.to_string()))?;
-    Ok(Artifact {
-        name: name.to_string(),
-        size_bytes: bytes.len() as u64,
-        sha256: format!("{:x}", Sha256::digest(bytes)),
-    })
-}
-
 impl Service {
-    /// Open the store under `cfg.data_dir`, re-queue interrupted jobs and start the dispatcher.
-    /// Must be called inside a tokio runtime.
-    pub fn start(cfg: ServiceConfig, models: Models) -> Result<Arc<Service>, ServiceError> {
-        let internal = |e: std::io::Error| ServiceError::Internal(e.to_string());
-        std::fs::create_dir_all(cfg.data_dir.join("artifacts")).map_err(internal)?;
-        let store = Store::open(&cfg.data_dir.join("jobs.sqlite3"))?;
+    /// Open the store, re-queue interrupted jobs and start the dispatcher. Must be called inside
+    /// a tokio runtime.
+    pub async fn start(cfg: ServiceConfig, models: Models) -> Result<Arc<Service>, ServiceError> {
+        // The stores are synchronous clients (PostgreSQL's runs its own runtime), so they are
+        // only ever used from the blocking pool.
+        let (location, dir) = (cfg.store.clone(), cfg.data_dir.clone());
+        let store = tokio::task::spawn_blocking(move || {
+            let mut s = store::open(&location, &dir)?;
+            s.claim()?;
+            Ok::<_, StoreError>(s)
+        })
+        .await
+        .map_err(|e| ServiceError::Internal(e.to_string()))?
+        .map_err(|e| ServiceError::Internal(format!("opening the job store {}: {e}", cfg.store)))?;
+        tracing::info!(store = %cfg.store, backend = store.backend(), "job store open");
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(cfg.worker_threads.max(1))
             .thread_name(|i| format!("physnap-worker-{i}"))
@@ -287,7 +290,10 @@ impl Service {
             shutdown_tx,
             metrics: Metrics::default(),
         });
-        svc.recover()?;
+        let r = svc.clone();
+        tokio::task::spawn_blocking(move || r.recover())
+            .await
+            .map_err(|e| ServiceError::Internal(e.to_string()))??;
         let d = svc.clone();
         tokio::spawn(async move { d.dispatch().await });
         Ok(svc)
@@ -359,10 +365,10 @@ impl Service {
     /// Run a store operation on the blocking pool.
     async fn db<T: Send + 'static>(
         &self,
-        f: impl FnOnce(&mut Store) -> Result<T, StoreError> + Send + 'static,
+        f: impl FnOnce(&mut dyn JobStore) -> Result<T, StoreError> + Send + 'static,
     ) -> Result<T, ServiceError> {
         let store = self.store.clone();
-        tokio::task::spawn_blocking(move || f(&mut lock(&store)))
+        tokio::task::spawn_blocking(move || f(lock(&store).as_mut()))
             .await
             .map_err(|e| ServiceError::Internal(e.to_string()))?
             .map_err(ServiceError::from)
@@ -591,26 +597,18 @@ impl Service {
                 ),
             });
         }
-        let dir = self.artifact_dir(id);
         let key = id.to_string();
         self.db(move |s| s.delete(&key)).await?;
-        if dir.exists() {
-            std::fs::remove_dir_all(&dir).map_err(|e| ServiceError::Internal(e.to_string()))?;
-        }
         Ok(())
     }
 
-    fn artifact_dir(&self, id: &str) -> PathBuf {
-        self.cfg.data_dir.join("artifacts").join(id)
-    }
-
-    /// Path and record of a finished job's artefact.
+    /// Bytes and record of a finished job's artefact.
     pub async fn artifact(
         &self,
         tenant: &str,
         id: &str,
         name: &str,
-    ) -> Result<(PathBuf, Artifact), ServiceError> {
+    ) -> Result<(Vec<u8>, Artifact), ServiceError> {
         let rec = self.owned(tenant, id).await?;
         if rec.state != JobState::Succeeded {
             return Err(ServiceError::Conflict {
@@ -627,7 +625,14 @@ impl Service {
             .find(|a| a.name == name)
             .cloned()
             .ok_or_else(|| ServiceError::NotFound(format!("{id}/artifacts/{name}")))?;
-        Ok((self.artifact_dir(id).join(name), a))
+        let (key, file) = (id.to_string(), name.to_string());
+        let bytes = self
+            .db(move |s| s.artifact(&key, &file))
+            .await?
+            .ok_or_else(|| {
+                ServiceError::Internal(format!("artefact {name} of job {id} is missing"))
+            })?;
+        Ok((bytes, a))
     }
 
     async fn dispatch(self: Arc<Self>) {
@@ -756,23 +761,9 @@ impl Service {
                 });
             }
             Ok(Ok(Ok(output))) => {
-                let dir = self.artifact_dir(id);
-                let artifacts = tokio::task::spawn_blocking(move || {
-                    std::fs::create_dir_all(&dir)
-                        .map_err(|e| ServiceError::Internal(e.to_string()))?;
-                    let arts = output
-                        .files
-                        .iter()
-                        .map(|(n, b)| write_artifact(&dir, n, b))
-                        .collect::<Result<Vec<_>, _>>()?;
-                    // Make the renames durable before the store says SUCCEEDED.
-                    std::fs::File::open(&dir)
-                        .and_then(|d| d.sync_all())
-                        .map_err(|e| ServiceError::Internal(e.to_string()))?;
-                    Ok::<_, ServiceError>(arts)
-                })
-                .await
-                .map_err(|e| ServiceError::Internal(e.to_string()))?;
+                let key = id.to_string();
+                let files = output.files;
+                let artifacts = self.db(move |s| s.put_artifacts(&key, &files)).await;
                 match artifacts {
                     Ok(a) => {
                         rec.state = JobState::Succeeded;

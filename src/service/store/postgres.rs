@@ -1,0 +1,375 @@
+//! The PostgreSQL job store: the same rows as SQLite, artefacts as `bytea`, for physnap
+//! processes on several machines sharing one database.
+//!
+//! Why it exists: a lab outgrows one machine, and the database labs already run is the answer,
+//! not a home-made coordinator (`../shared/spec/service.md` §3). The schema is versioned: each
+//! entry of [`MIGRATIONS`] runs once, in order, inside a transaction holding an advisory lock,
+//! so replicas starting together migrate exactly once. Artefacts live in the database, so no
+//! shared disk is needed. A dropped connection is re-opened on the next call.
+
+use std::str::FromStr;
+use std::time::Duration;
+
+use postgres::{Client, Config, NoTls, Transaction};
+
+use super::{
+    Artifact, COLUMNS, JobRecord, JobStore, RawJob, StoreError, StoredEvent, artifact_record,
+};
+
+/// The schema, one migration an entry; version `i + 1` is `MIGRATIONS[i]`. Append only.
+pub const MIGRATIONS: &[&str] = &[
+    // 1: jobs, their events, idempotency keys and artefacts.
+    "CREATE TABLE jobs (
+        id TEXT PRIMARY KEY,
+        tenant TEXT NOT NULL,
+        state TEXT NOT NULL,
+        spec TEXT NOT NULL,
+        points BYTEA NOT NULL,
+        created_ms BIGINT NOT NULL,
+        started_ms BIGINT,
+        ended_ms BIGINT,
+        deadline_ms BIGINT NOT NULL,
+        attempt BIGINT NOT NULL,
+        sequence BIGINT NOT NULL,
+        error_type TEXT,
+        error_detail TEXT,
+        artifacts TEXT NOT NULL
+    );
+    CREATE INDEX jobs_tenant ON jobs (tenant, id);
+    CREATE INDEX jobs_unfinished ON jobs (id) WHERE state IN ('QUEUED', 'RUNNING');
+    CREATE TABLE events (
+        job_id TEXT NOT NULL,
+        sequence BIGINT NOT NULL,
+        kind TEXT NOT NULL,
+        data TEXT NOT NULL,
+        PRIMARY KEY (job_id, sequence)
+    );
+    CREATE TABLE idempotency (
+        tenant TEXT NOT NULL,
+        key TEXT NOT NULL,
+        request_hash TEXT NOT NULL,
+        job_id TEXT NOT NULL,
+        PRIMARY KEY (tenant, key)
+    );
+    CREATE TABLE artifact_data (
+        job_id TEXT NOT NULL,
+        name TEXT NOT NULL,
+        bytes BYTEA NOT NULL,
+        PRIMARY KEY (job_id, name)
+    );",
+];
+
+/// Any constant: the advisory lock that serialises migrations between replicas.
+const MIGRATION_LOCK: i64 = 0x0070_6879_736e_6170; // "physnap" in ASCII
+
+/// The session-level advisory lock a serving process holds ([`JobStore::claim`]).
+const SERVE_LOCK: i64 = 0x0070_6879_736e_6171;
+
+/// Connecting gives up after this long unless the URL says otherwise (`connect_timeout`).
+const CONNECT_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// The PostgreSQL job store.
+pub struct PgStore {
+    config: Config,
+    client: Client,
+    claimed: bool,
+}
+
+fn raw(r: &postgres::Row) -> RawJob {
+    RawJob {
+        id: r.get(0),
+        tenant: r.get(1),
+        state: r.get(2),
+        spec: r.get(3),
+        points: r.get(4),
+        created_ms: r.get(5),
+        started_ms: r.get(6),
+        ended_ms: r.get(7),
+        deadline_ms: r.get(8),
+        attempt: r.get(9),
+        sequence: r.get(10),
+        error_type: r.get(11),
+        error_detail: r.get(12),
+        artifacts: r.get(13),
+    }
+}
+
+impl PgStore {
+    /// Connect to `url` and bring the schema up to date.
+    pub fn connect(url: &str) -> Result<PgStore, StoreError> {
+        let mut config = Config::from_str(url)?;
+        if config.get_connect_timeout().is_none() {
+            config.connect_timeout(CONNECT_TIMEOUT);
+        }
+        config.application_name("physnap");
+        let client = config.connect(NoTls)?;
+        let mut store = PgStore {
+            config,
+            client,
+            claimed: false,
+        };
+        store.migrate()?;
+        Ok(store)
+    }
+
+    /// The schema version the database is at now.
+    pub fn schema_version(&mut self) -> Result<i32, StoreError> {
+        Ok(self
+            .client()?
+            .query_one("SELECT COALESCE(MAX(version), 0) FROM physnap_schema", &[])?
+            .get(0))
+    }
+
+    fn migrate(&mut self) -> Result<(), StoreError> {
+        let mut tx = self.client()?.transaction()?;
+        tx.execute("SELECT pg_advisory_xact_lock($1)", &[&MIGRATION_LOCK])?;
+        tx.batch_execute(
+            "CREATE TABLE IF NOT EXISTS physnap_schema (
+                version INTEGER PRIMARY KEY,
+                applied_ms BIGINT NOT NULL
+            )",
+        )?;
+        let found: i32 = tx
+            .query_one("SELECT COALESCE(MAX(version), 0) FROM physnap_schema", &[])?
+            .get(0);
+        let known = MIGRATIONS.len() as i32;
+        if found > known {
+            return Err(StoreError::SchemaTooNew { found, known });
+        }
+        for (i, sql) in MIGRATIONS.iter().enumerate().skip(found as usize) {
+            tx.batch_execute(sql)?;
+            tx.execute(
+                "INSERT INTO physnap_schema (version, applied_ms) VALUES ($1, $2)",
+                &[&(i as i32 + 1), &crate::service::jobs::now_ms()],
+            )?;
+            tracing::info!(version = i + 1, "job store: migrated PostgreSQL schema");
+        }
+        tx.commit()?;
+        Ok(())
+    }
+
+    /// The connection, re-opened if the server dropped it.
+    fn client(&mut self) -> Result<&mut Client, StoreError> {
+        if self.client.is_closed() {
+            tracing::warn!("job store: PostgreSQL connection lost; reconnecting");
+            self.client = self.config.connect(NoTls)?;
+            if self.claimed {
+                self.take_serve_lock()?;
+            }
+        }
+        Ok(&mut self.client)
+    }
+
+    fn take_serve_lock(&mut self) -> Result<(), StoreError> {
+        let got: bool = self
+            .client
+            .query_one("SELECT pg_try_advisory_lock($1)", &[&SERVE_LOCK])?
+            .get(0);
+        if got { Ok(()) } else { Err(StoreError::Busy) }
+    }
+
+    fn query_jobs(
+        &mut self,
+        sql: &str,
+        params: &[&(dyn postgres::types::ToSql + Sync)],
+    ) -> Result<Vec<JobRecord>, StoreError> {
+        self.client()?
+            .query(sql, params)?
+            .iter()
+            .map(|r| raw(r).decode())
+            .collect()
+    }
+}
+
+impl JobStore for PgStore {
+    fn backend(&self) -> &'static str {
+        "postgres"
+    }
+
+    fn claim(&mut self) -> Result<(), StoreError> {
+        self.client()?;
+        self.take_serve_lock()?;
+        self.claimed = true;
+        Ok(())
+    }
+
+    fn insert(
+        &mut self,
+        job: &JobRecord,
+        events: &[StoredEvent],
+        idempotency: Option<(&str, &str)>,
+    ) -> Result<(), StoreError> {
+        let j = RawJob::encode(job);
+        let mut tx = self.client()?.transaction()?;
+        tx.execute(
+            &format!(
+                "INSERT INTO jobs ({COLUMNS}) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14)"
+            ),
+            &[
+                &j.id,
+                &j.tenant,
+                &j.state,
+                &j.spec,
+                &j.points,
+                &j.created_ms,
+                &j.started_ms,
+                &j.ended_ms,
+                &j.deadline_ms,
+                &j.attempt,
+                &j.sequence,
+                &j.error_type,
+                &j.error_detail,
+                &j.artifacts,
+            ],
+        )?;
+        if let Some((key, hash)) = idempotency {
+            tx.execute(
+                "INSERT INTO idempotency (tenant, key, request_hash, job_id) VALUES ($1, $2, $3, $4)",
+                &[&job.tenant, &key, &hash, &job.id],
+            )?;
+        }
+        append_events(&mut tx, &job.id, events)?;
+        tx.commit()?;
+        Ok(())
+    }
+
+    fn update(&mut self, job: &JobRecord, events: &[StoredEvent]) -> Result<(), StoreError> {
+        let j = RawJob::encode(job);
+        let mut tx = self.client()?.transaction()?;
+        tx.execute(
+            "UPDATE jobs SET state = $2, started_ms = $3, ended_ms = $4, attempt = $5, sequence = $6, \
+             error_type = $7, error_detail = $8, artifacts = $9 WHERE id = $1",
+            &[
+                &j.id,
+                &j.state,
+                &j.started_ms,
+                &j.ended_ms,
+                &j.attempt,
+                &j.sequence,
+                &j.error_type,
+                &j.error_detail,
+                &j.artifacts,
+            ],
+        )?;
+        append_events(&mut tx, &job.id, events)?;
+        tx.commit()?;
+        Ok(())
+    }
+
+    fn idempotency(
+        &mut self,
+        tenant: &str,
+        key: &str,
+    ) -> Result<Option<(String, String)>, StoreError> {
+        Ok(self
+            .client()?
+            .query_opt(
+                "SELECT request_hash, job_id FROM idempotency WHERE tenant = $1 AND key = $2",
+                &[&tenant, &key],
+            )?
+            .map(|r| (r.get(0), r.get(1))))
+    }
+
+    fn get(&mut self, id: &str) -> Result<Option<JobRecord>, StoreError> {
+        let sql = format!("SELECT {COLUMNS} FROM jobs WHERE id = $1");
+        Ok(self.query_jobs(&sql, &[&id])?.pop())
+    }
+
+    fn list(
+        &mut self,
+        tenant: &str,
+        after: Option<&str>,
+        limit: usize,
+    ) -> Result<Vec<JobRecord>, StoreError> {
+        // COLLATE "C": ids compare byte-wise, as in SQLite, whatever the database's locale.
+        let sql = format!(
+            "SELECT {COLUMNS} FROM jobs WHERE tenant = $1 AND id > $2 COLLATE \"C\" \
+             ORDER BY id COLLATE \"C\" LIMIT $3"
+        );
+        self.query_jobs(&sql, &[&tenant, &after.unwrap_or(""), &(limit as i64)])
+    }
+
+    fn unfinished(&mut self) -> Result<Vec<JobRecord>, StoreError> {
+        let sql = format!(
+            "SELECT {COLUMNS} FROM jobs WHERE state IN ('QUEUED', 'RUNNING') ORDER BY id COLLATE \"C\""
+        );
+        self.query_jobs(&sql, &[])
+    }
+
+    fn events_after(&mut self, id: &str, after: u64) -> Result<Vec<StoredEvent>, StoreError> {
+        let after = i64::try_from(after).unwrap_or(i64::MAX);
+        Ok(self
+            .client()?
+            .query(
+                "SELECT sequence, kind, data FROM events WHERE job_id = $1 AND sequence > $2 ORDER BY sequence",
+                &[&id, &after],
+            )?
+            .iter()
+            .map(|r| StoredEvent {
+                sequence: r.get::<_, i64>(0) as u64,
+                kind: r.get(1),
+                data: r.get(2),
+            })
+            .collect())
+    }
+
+    fn delete(&mut self, id: &str) -> Result<(), StoreError> {
+        let mut tx = self.client()?.transaction()?;
+        for table in ["events", "idempotency", "artifact_data", "jobs"] {
+            let key = if table == "jobs" { "id" } else { "job_id" };
+            tx.execute(&format!("DELETE FROM {table} WHERE {key} = $1"), &[&id])?;
+        }
+        tx.commit()?;
+        Ok(())
+    }
+
+    fn count_by_state(&mut self) -> Result<Vec<(String, u64)>, StoreError> {
+        Ok(self
+            .client()?
+            .query("SELECT state, COUNT(*) FROM jobs GROUP BY state", &[])?
+            .iter()
+            .map(|r| (r.get(0), r.get::<_, i64>(1) as u64))
+            .collect())
+    }
+
+    fn put_artifacts(
+        &mut self,
+        id: &str,
+        files: &[(String, Vec<u8>)],
+    ) -> Result<Vec<Artifact>, StoreError> {
+        let mut tx = self.client()?.transaction()?;
+        for (name, bytes) in files {
+            tx.execute(
+                "INSERT INTO artifact_data (job_id, name, bytes) VALUES ($1, $2, $3) \
+                 ON CONFLICT (job_id, name) DO UPDATE SET bytes = EXCLUDED.bytes",
+                &[&id, name, bytes],
+            )?;
+        }
+        tx.commit()?;
+        Ok(files.iter().map(|(n, b)| artifact_record(n, b)).collect())
+    }
+
+    fn artifact(&mut self, id: &str, name: &str) -> Result<Option<Vec<u8>>, StoreError> {
+        Ok(self
+            .client()?
+            .query_opt(
+                "SELECT bytes FROM artifact_data WHERE job_id = $1 AND name = $2",
+                &[&id, &name],
+            )?
+            .map(|r| r.get(0)))
+    }
+}
+
+fn append_events(
+    tx: &mut Transaction<'_>,
+    id: &str,
+    events: &[StoredEvent],
+) -> Result<(), StoreError> {
+    for e in events {
+        tx.execute(
+            "INSERT INTO events (job_id, sequence, kind, data) VALUES ($1, $2, $3, $4)",
+            &[&id, &(e.sequence as i64), &e.kind, &e.data],
+        )?;
+    }
+    Ok(())
+}

@@ -9,7 +9,7 @@ mod support;
 use physnap::service::spec::{JobInput, Limits, ModelCaps, PointsInput, validate};
 use physnap::service::store::postgres::{MIGRATIONS, PgStore};
 use physnap::service::store::{
-    self, JobFailure, JobRecord, JobState, JobStore, StoreError, StoreLocation, StoredEvent,
+    self, JobFailure, JobRecord, JobState, JobStore, Lease, StoreError, StoreLocation, StoredEvent,
 };
 use support::pg::Pg;
 
@@ -174,6 +174,115 @@ fn contract(mut s: Box<dyn JobStore>, reopen: &dyn Fn() -> Box<dyn JobStore>) {
     .unwrap();
 }
 
+/// The shared queue: leases, heartbeats, fencing by attempt, cancels across processes.
+fn lease_contract(open: &dyn Fn() -> Box<dyn JobStore>) {
+    let mut s = open();
+    for id in ["q1", "q2"] {
+        s.insert(&record(id, "t", 1), &[ev(1, "state")], None)
+            .unwrap();
+    }
+    // The oldest job first: RUNNING at attempt 1, started now, no cancel.
+    let Lease {
+        job: mut q1,
+        cancel_requested,
+    } = s.lease_next("w1", 1_000, 500).unwrap().unwrap();
+    assert_eq!(
+        (q1.id.as_str(), q1.state, q1.attempt, q1.started_ms),
+        ("q1", JobState::Running, 1, Some(1_000))
+    );
+    assert!(!cancel_requested);
+    assert_eq!(s.get("q1").unwrap().unwrap(), q1);
+    // Its RUNNING event, fenced on the lease.
+    q1.sequence = 2;
+    assert!(
+        s.update_if(&q1, &[ev(2, "state")], JobState::Running, 1)
+            .unwrap()
+    );
+    // Another worker gets the next job; then nothing while both leases hold.
+    let q2 = s.lease_next("w2", 1_100, 500).unwrap().unwrap().job;
+    assert_eq!(q2.id, "q2");
+    assert_eq!(s.lease_next("w3", 1_200, 500).unwrap(), None);
+    // Heartbeats extend a lease and carry cancel requests.
+    assert_eq!(s.heartbeat("q1", 1, 1_300, 500).unwrap(), Some(false));
+    s.request_cancel("q2").unwrap();
+    assert_eq!(s.heartbeat("q2", 1, 1_300, 500).unwrap(), Some(true));
+    assert_eq!(s.heartbeat("q2", 7, 1_300, 500).unwrap(), None);
+    // q1's worker stops heartbeating: after expiry (1,800) another worker takes it over.
+    assert_eq!(s.lease_next("w3", 1_700, 500).unwrap(), None);
+    let taken = s.lease_next("w3", 1_900, 500).unwrap().unwrap().job;
+    assert_eq!((taken.id.as_str(), taken.attempt), ("q1", 2));
+    assert_eq!(taken.sequence, 2, "the lease keeps the event log");
+    // The old attempt is fenced out: its heartbeat says lost, its writes change nothing.
+    assert_eq!(s.heartbeat("q1", 1, 1_950, 500).unwrap(), None);
+    let mut late = q1.clone();
+    late.state = JobState::Succeeded;
+    late.sequence = 3;
+    assert!(
+        !s.update_if(&late, &[ev(3, "done")], JobState::Running, 1)
+            .unwrap()
+    );
+    assert_eq!(s.get("q1").unwrap().unwrap(), taken);
+    assert_eq!(s.events_after("q1", 0).unwrap().len(), 2);
+    // The new attempt finishes, and a finished job is never leased again.
+    let mut done = taken.clone();
+    done.state = JobState::Succeeded;
+    done.sequence = 3;
+    assert!(
+        s.update_if(&done, &[ev(3, "done")], JobState::Running, 2)
+            .unwrap()
+    );
+    assert_eq!(s.heartbeat("q1", 2, 2_000, 500).unwrap(), None);
+    let q2 = s.lease_next("w4", 99_000, 10_000_000).unwrap().unwrap().job;
+    assert_eq!((q2.id.as_str(), q2.attempt), ("q2", 2));
+    assert_eq!(s.lease_next("w4", 99_000, 500).unwrap(), None);
+    // A cancel of a QUEUED job, fenced on QUEUED, loses to a worker that leased it first.
+    s.insert(&record("q3", "t", 1), &[ev(1, "state")], None)
+        .unwrap();
+    let queued = s.get("q3").unwrap().unwrap();
+    assert_eq!(
+        s.lease_next("w1", 100_000, 10_000_000)
+            .unwrap()
+            .unwrap()
+            .job
+            .id,
+        "q3"
+    );
+    let mut cancelled = queued.clone();
+    cancelled.state = JobState::Cancelled;
+    cancelled.sequence = 2;
+    assert!(
+        !s.update_if(&cancelled, &[ev(2, "state")], JobState::Queued, 0)
+            .unwrap()
+    );
+    assert_eq!(s.get("q3").unwrap().unwrap().state, JobState::Running);
+
+    // Four workers, each with its own connection, drain 24 jobs: each job leased once.
+    for i in 0..24 {
+        s.insert(
+            &record(&format!("r{i:02}"), "t", 1),
+            &[ev(1, "state")],
+            None,
+        )
+        .unwrap();
+    }
+    let leased = std::sync::Mutex::new(Vec::new());
+    std::thread::scope(|scope| {
+        for w in 0..4 {
+            let mut store = open();
+            let leased = &leased;
+            scope.spawn(move || {
+                while let Some(l) = store.lease_next(&format!("w{w}"), 200_000, 60_000).unwrap() {
+                    leased.lock().unwrap().push(l.job.id);
+                }
+            });
+        }
+    });
+    let mut leased = leased.into_inner().unwrap();
+    leased.sort();
+    let expected: Vec<String> = (0..24).map(|i| format!("r{i:02}")).collect();
+    assert_eq!(leased, expected);
+}
+
 #[test]
 fn the_sqlite_store_keeps_the_contract() {
     let dir = tempfile::tempdir().unwrap();
@@ -182,6 +291,8 @@ fn the_sqlite_store_keeps_the_contract() {
     // Artefacts are files beside the database, removed with their job.
     assert!(dir.path().join("jobs.sqlite3").exists());
     assert!(!dir.path().join("artifacts").join("0001-a").exists());
+    let leases = tempfile::tempdir().unwrap();
+    lease_contract(&|| store::open(&StoreLocation::Sqlite, leases.path()).unwrap());
 }
 
 #[test]
@@ -203,6 +314,8 @@ fn the_postgres_store_keeps_the_contract_and_migrates_once() {
     contract(open(), &open);
     // Nothing lands on the local disk.
     assert!(!pg.dir().join("artifacts").exists());
+    let leases: StoreLocation = pg.fresh_db("leases").parse().unwrap();
+    lease_contract(&|| store::open(&leases, pg.dir()).unwrap());
 
     // A database migrated by a newer physnap is refused with both versions named.
     let mut c = postgres::Client::connect(&url, postgres::NoTls).unwrap();
@@ -250,26 +363,4 @@ fn store_locations_parse_and_bad_ones_name_the_value_without_the_password() {
         .expect("nothing listens on port 1");
     assert!(matches!(e, StoreError::Postgres(_)), "{e}");
     assert!(t0.elapsed().as_secs() < 6);
-}
-
-#[test]
-fn one_process_serves_a_postgres_database_at_a_time() {
-    let pg = Pg::start();
-    let url = pg.fresh_db("claim");
-    let mut first = PgStore::connect(&url).unwrap();
-    first.claim().unwrap();
-    let mut second = PgStore::connect(&url).unwrap();
-    let e = second.claim().unwrap_err();
-    assert!(matches!(e, StoreError::Busy), "{e}");
-    assert!(e.to_string().contains("another physnap process"), "{e}");
-    // The claim ends with its session (the server notices the closed connection promptly).
-    drop(first);
-    let t0 = std::time::Instant::now();
-    while let Err(e) = second.claim() {
-        assert!(
-            t0.elapsed().as_secs() < 10,
-            "the claim outlived its session: {e}"
-        );
-        std::thread::sleep(std::time::Duration::from_millis(50));
-    }
 }

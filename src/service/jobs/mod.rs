@@ -246,14 +246,12 @@ impl Service {
         // The stores are synchronous clients (PostgreSQL's runs its own runtime), so they are
         // only ever used from the blocking pool.
         let (location, dir) = (cfg.store.clone(), cfg.data_dir.clone());
-        let store = tokio::task::spawn_blocking(move || {
-            let mut s = store::open(&location, &dir)?;
-            s.claim()?;
-            Ok::<_, StoreError>(s)
-        })
-        .await
-        .map_err(|e| ServiceError::Internal(e.to_string()))?
-        .map_err(|e| ServiceError::Internal(format!("opening the job store {}: {e}", cfg.store)))?;
+        let store = tokio::task::spawn_blocking(move || store::open(&location, &dir))
+            .await
+            .map_err(|e| ServiceError::Internal(e.to_string()))?
+            .map_err(|e| {
+                ServiceError::Internal(format!("opening the job store {}: {e}", cfg.store))
+            })?;
         tracing::info!(store = %cfg.store, backend = store.backend(), "job store open");
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(cfg.worker_threads.max(1))

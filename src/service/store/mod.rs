@@ -54,12 +54,6 @@ pub enum StoreError {
         /// What failed to decode.
         detail: String,
     },
-    /// Another physnap already serves this database.
-    #[error(
-        "job store: another physnap process already serves this database; one process per \
-         database (several replicas sharing one queue are not supported yet)"
-    )]
-    Busy,
     /// The database's schema is newer than this binary knows.
     #[error(
         "job store: the database is at schema version {found}, this physnap knows up to {known}; \
@@ -77,10 +71,7 @@ impl StoreError {
     /// Machine-readable kind.
     pub fn error_type(&self) -> &'static str {
         match self {
-            StoreError::Sqlite(_)
-            | StoreError::Postgres(_)
-            | StoreError::Io { .. }
-            | StoreError::Busy => "store",
+            StoreError::Sqlite(_) | StoreError::Postgres(_) | StoreError::Io { .. } => "store",
             StoreError::Corrupt { .. } | StoreError::SchemaTooNew { .. } => "store_corrupt",
         }
     }
@@ -170,11 +161,6 @@ pub trait JobStore: Send {
     /// `sqlite` or `postgres` (logged, and in metrics).
     fn backend(&self) -> &'static str;
 
-    /// Take the store for this process, which runs its jobs and re-queues the unfinished ones
-    /// at start: a second process claiming the same store gets [`StoreError::Busy`]. The claim
-    /// ends with the handle (or the process).
-    fn claim(&mut self) -> Result<(), StoreError>;
-
     /// Insert a new job with its first events, and its idempotency key `(key, request hash)`,
     /// in one transaction.
     fn insert(
@@ -186,6 +172,48 @@ pub trait JobStore: Send {
 
     /// Write the job's mutable fields and append `events`, in one transaction.
     fn update(&mut self, job: &JobRecord, events: &[StoredEvent]) -> Result<(), StoreError>;
+
+    /// Like [`JobStore::update`], but only while the stored job is still in `state` at
+    /// `attempt` (the fencing token: a worker whose lease was taken over, or an API replica
+    /// cancelling a job a worker just leased, writes nothing). False when fenced out. A state
+    /// other than RUNNING ends the job's lease.
+    fn update_if(
+        &mut self,
+        job: &JobRecord,
+        events: &[StoredEvent],
+        state: JobState,
+        attempt: u32,
+    ) -> Result<bool, StoreError>;
+
+    /// Lease the oldest job that is QUEUED, or RUNNING under an expired lease, to `worker`
+    /// until `now_ms + lease_ms`: it becomes RUNNING with `attempt + 1` and `started_ms =
+    /// now_ms` (no event is written: the caller appends the RUNNING event with
+    /// [`JobStore::update_if`]). Concurrent callers never get the same job.
+    fn lease_next(
+        &mut self,
+        worker: &str,
+        now_ms: i64,
+        lease_ms: i64,
+    ) -> Result<Option<Lease>, StoreError>;
+
+    /// Extend the lease of `id` at `attempt` to `now_ms + lease_ms`. `None`: the lease is lost
+    /// (the job was re-leased or ended); otherwise whether a cancel was requested.
+    fn heartbeat(
+        &mut self,
+        id: &str,
+        attempt: u32,
+        now_ms: i64,
+        lease_ms: i64,
+    ) -> Result<Option<bool>, StoreError>;
+
+    /// Ask whichever worker runs `id` to cancel it (seen at its next heartbeat, or at once
+    /// through [`Channel::Cancel`]).
+    fn request_cancel(&mut self, id: &str) -> Result<(), StoreError>;
+
+    /// Tell other processes something that is not stored (progress, cancels). Committed events
+    /// are announced by the writes themselves ([`Channel::Events`]). A no-op where no other
+    /// process can share the store (SQLite).
+    fn notify(&mut self, channel: Channel, payload: &str) -> Result<(), StoreError>;
 
     /// The job an idempotency key was first used for: `(request_hash, job_id)`.
     fn idempotency(
@@ -227,6 +255,44 @@ pub trait JobStore: Send {
 
     /// The bytes of a stored artefact.
     fn artifact(&mut self, id: &str, name: &str) -> Result<Option<Vec<u8>>, StoreError>;
+}
+
+/// A job leased to a worker.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Lease {
+    /// The job, now RUNNING at its new attempt.
+    pub job: JobRecord,
+    /// Whether a cancel was requested before the lease.
+    pub cancel_requested: bool,
+}
+
+/// The notification channels between processes sharing a store.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Channel {
+    /// `<job id> <sequence> <kind>` of a job's last committed event.
+    Events,
+    /// A job's latest progress, `<job id> <progress JSON>`.
+    Progress,
+    /// `<job id>`: a cancel was requested.
+    Cancel,
+}
+
+impl Channel {
+    /// The channel's name (PostgreSQL `LISTEN` / `NOTIFY`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Channel::Events => "physnap_events",
+            Channel::Progress => "physnap_progress",
+            Channel::Cancel => "physnap_cancel",
+        }
+    }
+
+    /// The channel of a name.
+    pub fn of(name: &str) -> Option<Channel> {
+        [Channel::Events, Channel::Progress, Channel::Cancel]
+            .into_iter()
+            .find(|c| c.name() == name)
+    }
 }
 
 /// The record of an artefact's bytes.

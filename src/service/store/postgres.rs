@@ -13,7 +13,8 @@ use std::time::Duration;
 use postgres::{Client, Config, NoTls, Transaction};
 
 use super::{
-    Artifact, COLUMNS, JobRecord, JobStore, RawJob, StoreError, StoredEvent, artifact_record,
+    Artifact, COLUMNS, Channel, JobRecord, JobState, JobStore, Lease, RawJob, StoreError,
+    StoredEvent, artifact_record,
 };
 
 /// The schema, one migration an entry; version `i + 1` is `MIGRATIONS[i]`. Append only.
@@ -57,13 +58,15 @@ pub const MIGRATIONS: &[&str] = &[
         bytes BYTEA NOT NULL,
         PRIMARY KEY (job_id, name)
     );",
+    // 2: leases (a worker's claim on a RUNNING job until it stops heartbeating) and cancels
+    // requested of a job running in another process.
+    "ALTER TABLE jobs ADD COLUMN lease_owner TEXT;
+    ALTER TABLE jobs ADD COLUMN lease_expires_ms BIGINT;
+    ALTER TABLE jobs ADD COLUMN cancel_requested BOOLEAN NOT NULL DEFAULT FALSE;",
 ];
 
 /// Any constant: the advisory lock that serialises migrations between replicas.
 const MIGRATION_LOCK: i64 = 0x0070_6879_736e_6170; // "physnap" in ASCII
-
-/// The session-level advisory lock a serving process holds ([`JobStore::claim`]).
-const SERVE_LOCK: i64 = 0x0070_6879_736e_6171;
 
 /// Connecting gives up after this long unless the URL says otherwise (`connect_timeout`).
 const CONNECT_TIMEOUT: Duration = Duration::from_secs(10);
@@ -72,7 +75,6 @@ const CONNECT_TIMEOUT: Duration = Duration::from_secs(10);
 pub struct PgStore {
     config: Config,
     client: Client,
-    claimed: bool,
 }
 
 fn raw(r: &postgres::Row) -> RawJob {
@@ -103,11 +105,7 @@ impl PgStore {
         }
         config.application_name("physnap");
         let client = config.connect(NoTls)?;
-        let mut store = PgStore {
-            config,
-            client,
-            claimed: false,
-        };
+        let mut store = PgStore { config, client };
         store.migrate()?;
         Ok(store)
     }
@@ -153,19 +151,50 @@ impl PgStore {
         if self.client.is_closed() {
             tracing::warn!("job store: PostgreSQL connection lost; reconnecting");
             self.client = self.config.connect(NoTls)?;
-            if self.claimed {
-                self.take_serve_lock()?;
-            }
         }
         Ok(&mut self.client)
     }
 
-    fn take_serve_lock(&mut self) -> Result<(), StoreError> {
-        let got: bool = self
-            .client
-            .query_one("SELECT pg_try_advisory_lock($1)", &[&SERVE_LOCK])?
-            .get(0);
-        if got { Ok(()) } else { Err(StoreError::Busy) }
+    /// Write the job's mutable fields and append `events`, only while the stored job is in
+    /// `expect` (state, attempt) when given; announce the last event on [`Channel::Events`].
+    fn write(
+        &mut self,
+        job: &JobRecord,
+        events: &[StoredEvent],
+        expect: Option<(JobState, u32)>,
+    ) -> Result<bool, StoreError> {
+        let j = RawJob::encode(job);
+        let (state, attempt) = match expect {
+            Some((s, a)) => (Some(s.as_str()), Some(i64::from(a))),
+            None => (None, None),
+        };
+        let mut tx = self.client()?.transaction()?;
+        let n = tx.execute(
+            "UPDATE jobs SET state = $2, started_ms = $3, ended_ms = $4, attempt = $5, sequence = $6, \
+             error_type = $7, error_detail = $8, artifacts = $9, \
+             lease_owner = CASE WHEN $2 = 'RUNNING' THEN lease_owner END, \
+             lease_expires_ms = CASE WHEN $2 = 'RUNNING' THEN lease_expires_ms END \
+             WHERE id = $1 AND ($10::TEXT IS NULL OR state = $10) AND ($11::BIGINT IS NULL OR attempt = $11)",
+            &[
+                &j.id,
+                &j.state,
+                &j.started_ms,
+                &j.ended_ms,
+                &j.attempt,
+                &j.sequence,
+                &j.error_type,
+                &j.error_detail,
+                &j.artifacts,
+                &state,
+                &attempt,
+            ],
+        )?;
+        if n == 0 && expect.is_some() {
+            return Ok(false);
+        }
+        append_events(&mut tx, &job.id, events)?;
+        tx.commit()?;
+        Ok(true)
     }
 
     fn query_jobs(
@@ -184,13 +213,6 @@ impl PgStore {
 impl JobStore for PgStore {
     fn backend(&self) -> &'static str {
         "postgres"
-    }
-
-    fn claim(&mut self) -> Result<(), StoreError> {
-        self.client()?;
-        self.take_serve_lock()?;
-        self.claimed = true;
-        Ok(())
     }
 
     fn insert(
@@ -234,25 +256,78 @@ impl JobStore for PgStore {
     }
 
     fn update(&mut self, job: &JobRecord, events: &[StoredEvent]) -> Result<(), StoreError> {
-        let j = RawJob::encode(job);
+        self.write(job, events, None).map(|_| ())
+    }
+
+    fn update_if(
+        &mut self,
+        job: &JobRecord,
+        events: &[StoredEvent],
+        state: JobState,
+        attempt: u32,
+    ) -> Result<bool, StoreError> {
+        self.write(job, events, Some((state, attempt)))
+    }
+
+    fn lease_next(
+        &mut self,
+        worker: &str,
+        now_ms: i64,
+        lease_ms: i64,
+    ) -> Result<Option<Lease>, StoreError> {
+        // The well-trodden queue: the subquery locks one eligible row and skips rows other
+        // workers are leasing right now, so no two callers get the same job.
+        let sql = format!(
+            "UPDATE jobs SET state = 'RUNNING', attempt = attempt + 1, started_ms = $2, \
+             lease_owner = $1, lease_expires_ms = $3 \
+             WHERE id = (SELECT id FROM jobs WHERE state = 'QUEUED' OR (state = 'RUNNING' AND \
+                 (lease_expires_ms IS NULL OR lease_expires_ms < $2)) \
+                 ORDER BY id COLLATE \"C\" LIMIT 1 FOR UPDATE SKIP LOCKED) \
+             RETURNING {COLUMNS}, cancel_requested"
+        );
+        let row = self
+            .client()?
+            .query_opt(&sql, &[&worker, &now_ms, &(now_ms + lease_ms)])?;
+        row.map(|r| {
+            Ok(Lease {
+                cancel_requested: r.get(14),
+                job: raw(&r).decode()?,
+            })
+        })
+        .transpose()
+    }
+
+    fn heartbeat(
+        &mut self,
+        id: &str,
+        attempt: u32,
+        now_ms: i64,
+        lease_ms: i64,
+    ) -> Result<Option<bool>, StoreError> {
+        Ok(self
+            .client()?
+            .query_opt(
+                "UPDATE jobs SET lease_expires_ms = $3 \
+                 WHERE id = $1 AND attempt = $2 AND state = 'RUNNING' RETURNING cancel_requested",
+                &[&id, &i64::from(attempt), &(now_ms + lease_ms)],
+            )?
+            .map(|r| r.get(0)))
+    }
+
+    fn request_cancel(&mut self, id: &str) -> Result<(), StoreError> {
         let mut tx = self.client()?.transaction()?;
         tx.execute(
-            "UPDATE jobs SET state = $2, started_ms = $3, ended_ms = $4, attempt = $5, sequence = $6, \
-             error_type = $7, error_detail = $8, artifacts = $9 WHERE id = $1",
-            &[
-                &j.id,
-                &j.state,
-                &j.started_ms,
-                &j.ended_ms,
-                &j.attempt,
-                &j.sequence,
-                &j.error_type,
-                &j.error_detail,
-                &j.artifacts,
-            ],
+            "UPDATE jobs SET cancel_requested = TRUE WHERE id = $1",
+            &[&id],
         )?;
-        append_events(&mut tx, &job.id, events)?;
+        tx.execute("SELECT pg_notify($1, $2)", &[&Channel::Cancel.name(), &id])?;
         tx.commit()?;
+        Ok(())
+    }
+
+    fn notify(&mut self, channel: Channel, payload: &str) -> Result<(), StoreError> {
+        self.client()?
+            .execute("SELECT pg_notify($1, $2)", &[&channel.name(), &payload])?;
         Ok(())
     }
 
@@ -371,5 +446,95 @@ fn append_events(
             &[&id, &(e.sequence as i64), &e.kind, &e.data],
         )?;
     }
+    // Delivered at commit, to every listening process (API replicas' streams, idle workers).
+    if let Some(e) = events.last() {
+        tx.execute(
+            "SELECT pg_notify($1, $2)",
+            &[
+                &Channel::Events.name(),
+                &format!("{id} {} {}", e.sequence, e.kind),
+            ],
+        )?;
+    }
     Ok(())
+}
+
+/// What [`listen`] delivers: a notification, or `Resync` after a reconnect (notifications sent
+/// while disconnected are lost, so listeners re-read what they follow).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Heard {
+    /// A notification on a physnap channel.
+    Note(Channel, String),
+    /// The connection was re-opened.
+    Resync,
+}
+
+/// Listen on every [`Channel`] with a connection of its own, on a dedicated thread, and hand
+/// each notification to `on` until `stop` is set. A lost connection is re-opened (once a
+/// second), followed by [`Heard::Resync`].
+pub fn listen(
+    url: &str,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    mut on: impl FnMut(Heard) + Send + 'static,
+) -> Result<std::thread::JoinHandle<()>, StoreError> {
+    use postgres::fallible_iterator::FallibleIterator;
+    use std::sync::atomic::Ordering;
+    let mut config = Config::from_str(url)?;
+    if config.get_connect_timeout().is_none() {
+        config.connect_timeout(CONNECT_TIMEOUT);
+    }
+    config.application_name("physnap-listen");
+    let subscribe = move |config: &Config| -> Result<Client, postgres::Error> {
+        let mut c = config.connect(NoTls)?;
+        for ch in [Channel::Events, Channel::Progress, Channel::Cancel] {
+            c.batch_execute(&format!("LISTEN {}", ch.name()))?;
+        }
+        Ok(c)
+    };
+    let mut client = subscribe(&config)?;
+    let handle = std::thread::Builder::new()
+        .name("physnap-listen".into())
+        .spawn(move || {
+            while !stop.load(Ordering::Relaxed) {
+                let failed = {
+                    let mut notes = client.notifications();
+                    let mut it = notes.timeout_iter(Duration::from_millis(250));
+                    loop {
+                        match it.next() {
+                            Ok(Some(n)) => {
+                                if let Some(ch) = Channel::of(n.channel()) {
+                                    on(Heard::Note(ch, n.payload().to_string()));
+                                }
+                            }
+                            Ok(None) => break false,
+                            Err(e) => {
+                                tracing::warn!("job store: listening connection failed: {e}");
+                                break true;
+                            }
+                        }
+                    }
+                };
+                if failed || client.is_closed() {
+                    loop {
+                        if stop.load(Ordering::Relaxed) {
+                            return;
+                        }
+                        std::thread::sleep(Duration::from_secs(1));
+                        match subscribe(&config) {
+                            Ok(c) => {
+                                client = c;
+                                on(Heard::Resync);
+                                break;
+                            }
+                            Err(e) => tracing::warn!("job store: re-listening failed: {e}"),
+                        }
+                    }
+                }
+            }
+        })
+        .map_err(|source| StoreError::Io {
+            path: "physnap-listen thread".into(),
+            source,
+        })?;
+    Ok(handle)
 }

@@ -6,10 +6,11 @@
 
 use std::path::{Path, PathBuf};
 
-use rusqlite::{Connection, OptionalExtension, params};
+use rusqlite::{Connection, OptionalExtension, TransactionBehavior, params};
 
 use super::{
-    Artifact, COLUMNS, JobRecord, JobStore, RawJob, StoreError, StoredEvent, artifact_record,
+    Artifact, COLUMNS, Channel, JobRecord, JobState, JobStore, Lease, RawJob, StoreError,
+    StoredEvent, artifact_record,
 };
 
 /// The SQLite job store: `jobs.sqlite3` and `artifacts/` in one data directory.
@@ -18,7 +19,10 @@ pub struct SqliteStore {
     artifacts: PathBuf,
 }
 
-const SCHEMA: &str = "
+/// The schema, one migration an entry (`PRAGMA user_version` counts those applied). The
+/// first is idempotent: stores made before versioning are at version 0 with its tables.
+const MIGRATIONS: &[&str] = &[
+    "
 CREATE TABLE IF NOT EXISTS jobs (
     id TEXT PRIMARY KEY,
     tenant TEXT NOT NULL,
@@ -50,7 +54,13 @@ CREATE TABLE IF NOT EXISTS idempotency (
     job_id TEXT NOT NULL,
     PRIMARY KEY (tenant, key)
 );
-";
+",
+    "
+ALTER TABLE jobs ADD COLUMN lease_owner TEXT;
+ALTER TABLE jobs ADD COLUMN lease_expires_ms INTEGER;
+ALTER TABLE jobs ADD COLUMN cancel_requested INTEGER NOT NULL DEFAULT 0;
+",
+];
 
 fn raw(r: &rusqlite::Row<'_>) -> rusqlite::Result<RawJob> {
     Ok(RawJob {
@@ -84,7 +94,7 @@ impl SqliteStore {
     pub fn open(data_dir: &Path) -> Result<SqliteStore, StoreError> {
         let artifacts = data_dir.join("artifacts");
         std::fs::create_dir_all(&artifacts).map_err(io(&artifacts))?;
-        let conn = Connection::open(data_dir.join("jobs.sqlite3"))?;
+        let mut conn = Connection::open(data_dir.join("jobs.sqlite3"))?;
         let mode: String =
             conn.pragma_update_and_check(None, "journal_mode", "WAL", |r| r.get(0))?;
         if !mode.eq_ignore_ascii_case("wal") {
@@ -93,8 +103,62 @@ impl SqliteStore {
         conn.pragma_update(None, "synchronous", "FULL")?;
         conn.pragma_update(None, "foreign_keys", "ON")?;
         conn.busy_timeout(std::time::Duration::from_secs(5))?;
-        conn.execute_batch(SCHEMA)?;
+        let tx = conn.transaction_with_behavior(TransactionBehavior::Immediate)?;
+        let version: i64 = tx.query_row("PRAGMA user_version", [], |r| r.get(0))?;
+        if version > MIGRATIONS.len() as i64 {
+            return Err(StoreError::SchemaTooNew {
+                found: version as i32,
+                known: MIGRATIONS.len() as i32,
+            });
+        }
+        for sql in MIGRATIONS.iter().skip(version as usize) {
+            tx.execute_batch(sql)?;
+        }
+        tx.pragma_update(None, "user_version", MIGRATIONS.len() as i64)?;
+        tx.commit()?;
         Ok(SqliteStore { conn, artifacts })
+    }
+
+    /// Write the job's mutable fields and append `events`, only while the stored job is in
+    /// `expect` (state, attempt) when given.
+    fn write(
+        &mut self,
+        job: &JobRecord,
+        events: &[StoredEvent],
+        expect: Option<(JobState, u32)>,
+    ) -> Result<bool, StoreError> {
+        let j = RawJob::encode(job);
+        let (state, attempt) = match expect {
+            Some((s, a)) => (Some(s.as_str()), Some(i64::from(a))),
+            None => (None, None),
+        };
+        let tx = self.conn.transaction()?;
+        let n = tx.execute(
+            "UPDATE jobs SET state = ?2, started_ms = ?3, ended_ms = ?4, attempt = ?5, sequence = ?6, \
+             error_type = ?7, error_detail = ?8, artifacts = ?9, \
+             lease_owner = CASE WHEN ?2 = 'RUNNING' THEN lease_owner END, \
+             lease_expires_ms = CASE WHEN ?2 = 'RUNNING' THEN lease_expires_ms END \
+             WHERE id = ?1 AND (?10 IS NULL OR state = ?10) AND (?11 IS NULL OR attempt = ?11)",
+            params![
+                j.id,
+                j.state,
+                j.started_ms,
+                j.ended_ms,
+                j.attempt,
+                j.sequence,
+                j.error_type,
+                j.error_detail,
+                j.artifacts,
+                state,
+                attempt,
+            ],
+        )?;
+        if n == 0 && expect.is_some() {
+            return Ok(false);
+        }
+        append_events(&tx, &job.id, events)?;
+        tx.commit()?;
+        Ok(true)
     }
 
     fn query_jobs(
@@ -115,12 +179,6 @@ impl SqliteStore {
 impl JobStore for SqliteStore {
     fn backend(&self) -> &'static str {
         "sqlite"
-    }
-
-    /// One process per data directory is the deployment's rule (a container owns its volume);
-    /// SQLite's own locking keeps a second process's writes consistent.
-    fn claim(&mut self) -> Result<(), StoreError> {
-        Ok(())
     }
 
     fn insert(
@@ -164,25 +222,83 @@ impl JobStore for SqliteStore {
     }
 
     fn update(&mut self, job: &JobRecord, events: &[StoredEvent]) -> Result<(), StoreError> {
-        let tx = self.conn.transaction()?;
-        let j = RawJob::encode(job);
+        self.write(job, events, None).map(|_| ())
+    }
+
+    fn update_if(
+        &mut self,
+        job: &JobRecord,
+        events: &[StoredEvent],
+        state: JobState,
+        attempt: u32,
+    ) -> Result<bool, StoreError> {
+        self.write(job, events, Some((state, attempt)))
+    }
+
+    fn lease_next(
+        &mut self,
+        worker: &str,
+        now_ms: i64,
+        lease_ms: i64,
+    ) -> Result<Option<Lease>, StoreError> {
+        // An immediate transaction holds SQLite's one write lock: no other lease interleaves.
+        let tx = self
+            .conn
+            .transaction_with_behavior(TransactionBehavior::Immediate)?;
+        let id: Option<String> = tx
+            .query_row(
+                "SELECT id FROM jobs WHERE state = 'QUEUED' OR (state = 'RUNNING' AND \
+                 (lease_expires_ms IS NULL OR lease_expires_ms < ?1)) ORDER BY id LIMIT 1",
+                params![now_ms],
+                |r| r.get(0),
+            )
+            .optional()?;
+        let Some(id) = id else { return Ok(None) };
         tx.execute(
-            "UPDATE jobs SET state = ?2, started_ms = ?3, ended_ms = ?4, attempt = ?5, sequence = ?6, \
-             error_type = ?7, error_detail = ?8, artifacts = ?9 WHERE id = ?1",
-            params![
-                j.id,
-                j.state,
-                j.started_ms,
-                j.ended_ms,
-                j.attempt,
-                j.sequence,
-                j.error_type,
-                j.error_detail,
-                j.artifacts,
-            ],
+            "UPDATE jobs SET state = 'RUNNING', attempt = attempt + 1, started_ms = ?2, \
+             lease_owner = ?3, lease_expires_ms = ?4 WHERE id = ?1",
+            params![id, now_ms, worker, now_ms + lease_ms],
         )?;
-        append_events(&tx, &job.id, events)?;
+        let (raw, cancel) = tx.query_row(
+            &format!("SELECT {COLUMNS}, cancel_requested FROM jobs WHERE id = ?1"),
+            params![id],
+            |r| Ok((raw(r)?, r.get::<_, bool>(14)?)),
+        )?;
         tx.commit()?;
+        Ok(Some(Lease {
+            job: raw.decode()?,
+            cancel_requested: cancel,
+        }))
+    }
+
+    fn heartbeat(
+        &mut self,
+        id: &str,
+        attempt: u32,
+        now_ms: i64,
+        lease_ms: i64,
+    ) -> Result<Option<bool>, StoreError> {
+        Ok(self
+            .conn
+            .query_row(
+                "UPDATE jobs SET lease_expires_ms = ?3 \
+                 WHERE id = ?1 AND attempt = ?2 AND state = 'RUNNING' RETURNING cancel_requested",
+                params![id, attempt, now_ms + lease_ms],
+                |r| r.get(0),
+            )
+            .optional()?)
+    }
+
+    fn request_cancel(&mut self, id: &str) -> Result<(), StoreError> {
+        self.conn.execute(
+            "UPDATE jobs SET cancel_requested = 1 WHERE id = ?1",
+            params![id],
+        )?;
+        Ok(())
+    }
+
+    /// Nothing to tell: one process owns a SQLite store.
+    fn notify(&mut self, _channel: Channel, _payload: &str) -> Result<(), StoreError> {
         Ok(())
     }
 

@@ -26,9 +26,11 @@ impl Drop for Child9 {
 }
 
 /// `physnap serve` with `--data-dir root/<data> --store <store>`.
-fn spawn_on(root: &Path, data: &str, store: &str) -> Child9 {
+/// `physnap serve` on `store` with more flags (`--role`, `--lease-seconds`).
+fn spawn_with(root: &Path, data: &str, store: &str, more: &[&str]) -> Child9 {
     let mut child = Command::new(env!("CARGO_BIN_EXE_physnap"))
         .args(["serve", "--http", "127.0.0.1:0", "--grpc", "127.0.0.1:0"])
+        .args(more)
         .args(["--admin", "127.0.0.1:0", "--worker-threads", "1"])
         .arg("--data-dir")
         .arg(root.join(data))
@@ -96,8 +98,14 @@ async fn kill_9_mid_run_then_restart_on_postgres_finishes_once_with_same_bytes()
     kill_9_then_restart(&url, true).await;
 }
 
-/// `fresh_dir`: the restarted server gets a new, empty data directory.
-async fn kill_9_then_restart(store: &str, fresh_dir: bool) {
+/// `shared`: a shared store (PostgreSQL): the restarted server gets a new, empty data
+/// directory, and takes the job over when its lease (2 s) expires, with no QUEUED in between.
+async fn kill_9_then_restart(store: &str, shared: bool) {
+    let lease: &[&str] = if shared {
+        &["--lease-seconds", "2"]
+    } else {
+        &[]
+    };
     let root = tempfile::tempdir().unwrap();
     tiny_weights(&root.path().join("weights"));
     let c = reqwest::Client::new();
@@ -106,7 +114,7 @@ async fn kill_9_then_restart(store: &str, fresh_dir: bool) {
                       "sampler": "ddpm", "steps": 1000,
                       "category": "Door", "w_pc": 0.0, "w_pen": 0.0, "w_mob": 0.0});
 
-    let server = spawn_on(root.path(), "data", store);
+    let server = spawn_with(root.path(), "data", store, lease);
     let r = c
         .post(format!("http://{}/v1/jobs", server.http))
         .json(&body)
@@ -138,7 +146,12 @@ async fn kill_9_then_restart(store: &str, fresh_dir: bool) {
     drop(sse);
     drop(server); // kill -9 + wait
 
-    let server = spawn_on(root.path(), if fresh_dir { "data2" } else { "data" }, store);
+    let server = spawn_with(
+        root.path(),
+        if shared { "data2" } else { "data" },
+        store,
+        lease,
+    );
     let url = format!("http://{}/v1/jobs/{id}", server.http);
     let job = wait_done(&c, &url).await;
     assert_eq!(job["state"], "SUCCEEDED", "{job:#}");
@@ -151,11 +164,12 @@ async fn kill_9_then_restart(store: &str, fresh_dir: bool) {
         .filter(|e| e.event == "state")
         .map(|e| e.json()["state"].as_str().unwrap().to_string())
         .collect();
-    assert_eq!(
-        states,
-        ["QUEUED", "RUNNING", "QUEUED", "RUNNING", "SUCCEEDED"],
-        "{states:?}"
-    );
+    let expected: &[&str] = if shared {
+        &["QUEUED", "RUNNING", "RUNNING", "SUCCEEDED"]
+    } else {
+        &["QUEUED", "RUNNING", "QUEUED", "RUNNING", "SUCCEEDED"]
+    };
+    assert_eq!(states, expected, "{states:?}");
     assert_eq!(events.iter().filter(|e| e.event == "done").count(), 1);
     assert_eq!(
         events.iter().filter(|e| e.event == "artifact").count(),
@@ -186,7 +200,7 @@ async fn kill_9_then_restart(store: &str, fresh_dir: bool) {
         .unwrap();
     use sha2::Digest as _;
     assert_eq!(format!("{:x}", sha2::Sha256::digest(&bytes)), glb_sha(&job));
-    if fresh_dir {
+    if shared {
         for data in ["data", "data2"] {
             assert!(!root.path().join(data).join("artifacts").exists());
         }
@@ -258,4 +272,118 @@ fn no_auth_is_refused_off_loopback() {
         !root.path().join("data").exists(),
         "nothing is created when refusing"
     );
+}
+
+/// Scale-out: an API replica and a worker on one PostgreSQL database, all `physnap serve`
+/// processes. The API replica streams the worker's progress; `kill -9` of the worker mid-job,
+/// then a second worker: the job is re-leased once its lease expires, runs once more (attempt
+/// 2, no other run of it), and gives the bytes of an uninterrupted run.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn kill_9_of_a_worker_then_another_worker_finishes_its_job_once() {
+    let (_pg, url) = tokio::task::block_in_place(|| {
+        let pg = support::pg::Pg::start();
+        let url = pg.fresh_db("workers");
+        (pg, url)
+    });
+    let root = tempfile::tempdir().unwrap();
+    tiny_weights(&root.path().join("weights"));
+    let c = reqwest::Client::new();
+    let body = json!({"points": cloud(30), "seed": 11, "samples": 6, "resolution": 8,
+                      "sampler": "ddpm", "steps": 1000,
+                      "category": "Door", "w_pc": 0.0, "w_pen": 0.0, "w_mob": 0.0});
+    let lease = ["--lease-seconds", "2"];
+    let api = spawn_with(root.path(), "api", &url, &["--role", "api"]);
+    assert_ne!(api.http, "-");
+    let worker = spawn_with(
+        root.path(),
+        "w1",
+        &url,
+        &[&["--role", "worker"][..], &lease[..]].concat(),
+    );
+    assert_eq!(worker.http, "-", "a worker serves no API");
+    let r = c
+        .post(format!("http://{}/v1/jobs", api.http))
+        .json(&body)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    let id = r.json::<Value>().await.unwrap()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let url_job = format!("http://{}/v1/jobs/{id}", api.http);
+    // The API replica streams the progress of the job running in the worker process.
+    let mut sse = SseReader::new(c.get(format!("{url_job}/events")).send().await.unwrap());
+    loop {
+        let e = sse.next().await.expect("stream ended before progress");
+        if e.event == "progress" && e.json()["step"].as_u64().unwrap() >= 100 {
+            break;
+        }
+        assert_ne!(
+            e.event, "done",
+            "the job finished before it could be killed"
+        );
+    }
+    let t_kill = Instant::now();
+    drop(worker); // kill -9 + wait
+    let _worker2 = spawn_with(
+        root.path(),
+        "w2",
+        &url,
+        &[&["--role", "worker"][..], &lease[..]].concat(),
+    );
+    // The stream that was open goes on to the end, through the takeover.
+    let rest = sse.collect().await;
+    assert_eq!(rest.iter().filter(|e| e.event == "done").count(), 1);
+    let job = wait_done(&c, &url_job).await;
+    assert!(
+        t_kill.elapsed() >= Duration::from_millis(1500),
+        "re-leased before expiry"
+    );
+    assert_eq!(job["state"], "SUCCEEDED", "{job:#}");
+    assert_eq!(job["attempt"], 2, "{job:#}");
+    let events = SseReader::new(c.get(format!("{url_job}/events")).send().await.unwrap())
+        .collect()
+        .await;
+    let states: Vec<String> = events
+        .iter()
+        .filter(|e| e.event == "state")
+        .map(|e| e.json()["state"].as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(
+        states,
+        ["QUEUED", "RUNNING", "RUNNING", "SUCCEEDED"],
+        "{states:?}"
+    );
+    assert_eq!(events.iter().filter(|e| e.event == "done").count(), 1);
+
+    // An uninterrupted run of the same request gives the same bytes, served by the API
+    // replica from the database.
+    let r = c
+        .post(format!("http://{}/v1/jobs", api.http))
+        .json(&body)
+        .send()
+        .await
+        .unwrap();
+    let id2 = r.json::<Value>().await.unwrap()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let job2 = wait_done(&c, &format!("http://{}/v1/jobs/{id2}", api.http)).await;
+    assert_eq!(job2["attempt"], 1);
+    assert_eq!(glb_sha(&job), glb_sha(&job2));
+    let bytes = c
+        .get(format!("{url_job}/artifacts/model.glb"))
+        .send()
+        .await
+        .unwrap()
+        .bytes()
+        .await
+        .unwrap();
+    use sha2::Digest as _;
+    assert_eq!(format!("{:x}", sha2::Sha256::digest(&bytes)), glb_sha(&job));
+    for dir in ["api", "w1", "w2"] {
+        assert!(!root.path().join(dir).join("artifacts").exists());
+    }
 }

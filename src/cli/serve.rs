@@ -8,6 +8,7 @@
 use anyhow::Context;
 use clap::Args;
 use physnap::service::auth::Tenants;
+use physnap::service::jobs::Role;
 use physnap::service::server::{ServeConfig, Server};
 use physnap::service::store::StoreLocation;
 use std::io::{Read, Write};
@@ -38,6 +39,14 @@ pub struct ServeArgs {
         hide_env_values = true
     )]
     store: StoreLocation,
+    /// What this process does: `api` (accept, list, stream), `worker` (lease and run jobs;
+    /// admin port only) or `all`. api and worker need a shared store (--store postgres://…).
+    #[arg(long, env = "PHYSNAP_ROLE", default_value = "all")]
+    role: Role,
+    /// Seconds a worker's lease on a job lasts without a heartbeat (heartbeats come every
+    /// third of it); a killed worker's job is re-leased after this long. Shared store only.
+    #[arg(long, env = "PHYSNAP_LEASE_SECONDS", default_value_t = 15.0)]
+    lease_seconds: f64,
     /// Weights directory with manifest.json.
     #[arg(long, env = "PHYSNAP_WEIGHTS", default_value = "weights")]
     weights: PathBuf,
@@ -83,6 +92,12 @@ pub fn serve(a: ServeArgs) -> anyhow::Result<()> {
             a.drain_timeout
         );
     }
+    if !(a.lease_seconds.is_finite() && a.lease_seconds >= 0.3) {
+        anyhow::bail!(
+            "invalid --lease-seconds: {} (must be >= 0.3)",
+            a.lease_seconds
+        );
+    }
     if a.max_running_jobs == 0 || a.queue_capacity == 0 {
         anyhow::bail!("invalid --max-running-jobs / --queue-capacity: must be at least 1");
     }
@@ -97,6 +112,8 @@ pub fn serve(a: ServeArgs) -> anyhow::Result<()> {
         admin: a.admin,
         data_dir: a.data_dir,
         store: a.store,
+        role: a.role,
+        lease: Duration::from_secs_f64(a.lease_seconds),
         weights: a.weights,
         max_running_jobs: a.max_running_jobs,
         worker_threads,
@@ -114,7 +131,8 @@ pub fn serve(a: ServeArgs) -> anyhow::Result<()> {
     };
     tracing::info!(
         http = %cfg.http, grpc = %cfg.grpc, admin = %cfg.admin,
-        data_dir = %cfg.data_dir.display(), store = %cfg.store, weights = %cfg.weights.display(),
+        data_dir = %cfg.data_dir.display(), store = %cfg.store, role = cfg.role.as_str(),
+        lease_s = a.lease_seconds, weights = %cfg.weights.display(),
         max_running_jobs = cfg.max_running_jobs, worker_threads = cfg.worker_threads,
         queue_capacity = cfg.queue_capacity, max_body_bytes = cfg.max_body_bytes,
         job_timeout_s = cfg.job_timeout_seconds, drain_timeout_s = a.drain_timeout,
@@ -132,9 +150,14 @@ pub fn serve(a: ServeArgs) -> anyhow::Result<()> {
         let server = Server::bind(cfg).await?;
         let addrs = server.addrs();
         // One machine-readable line on stdout, so scripts (and tests) using port 0 can find us.
+        let (http, grpc) = if addrs.api {
+            (addrs.http.to_string(), addrs.grpc.to_string())
+        } else {
+            ("-".to_string(), "-".to_string())
+        };
         println!(
-            "physnap serve: http={} grpc={} admin={}",
-            addrs.http, addrs.grpc, addrs.admin
+            "physnap serve: http={http} grpc={grpc} admin={}",
+            addrs.admin
         );
         std::io::stdout().flush().ok();
         tracing::info!(http = %addrs.http, grpc = %addrs.grpc, admin = %addrs.admin, "listening");

@@ -641,6 +641,36 @@ pub fn progress_view(p: &Progress) -> ProgressView {
     }
 }
 
+/// The progress a [`ProgressView`] shows (without its preview), for progress that reached this
+/// process as JSON from another one. `None` for an unknown phase.
+pub fn progress_of_view(v: &ProgressView) -> Option<Progress> {
+    use super::runner::Phase;
+    let phase = [Phase::Denoising, Phase::Meshing, Phase::Exporting]
+        .into_iter()
+        .find(|p| p.as_str() == v.phase)?;
+    Some(Progress {
+        phase,
+        sample: v.sample,
+        samples: v.samples,
+        step: v.step,
+        total_steps: v.total_steps,
+        t: v.t,
+        eta_seconds: v.eta_seconds,
+        preview: None,
+        guidance: v
+            .guidance
+            .as_ref()
+            .map(|g| crate::engine::guidance::GuidanceLosses {
+                pc: g.l_pc,
+                pen: g.l_pen,
+                mob: g.l_mob,
+                free: g.l_free,
+                total: g.total,
+                grad_max: 0.0,
+            }),
+    })
+}
+
 /// Wire form of an artefact of job `id`.
 pub fn artifact_view(id: &str, a: &Artifact) -> ArtifactView {
     ArtifactView {

@@ -905,11 +905,16 @@ async fn metrics(State(svc): State<Arc<Service>>) -> Response {
         "# HELP physnap_job_run_seconds_sum Wall time of successful jobs.\n# TYPE physnap_job_run_seconds_sum counter\nphysnap_job_run_seconds_sum {:.3}",
         m.run_seconds_sum_ms.load(Ordering::Relaxed) as f64 / 1000.0
     );
+    // The queue is the store's when it is shared: an unreadable length is NaN, not a guess.
+    let queued = svc
+        .queued()
+        .await
+        .map_or_else(|_| "NaN".to_string(), |n| n.to_string());
     let _ = writeln!(
         s,
         "# HELP physnap_jobs_queued Jobs waiting.\n# TYPE physnap_jobs_queued gauge\nphysnap_jobs_queued {}\n\
          # HELP physnap_jobs_running Jobs running.\n# TYPE physnap_jobs_running gauge\nphysnap_jobs_running {}",
-        svc.queued(),
+        queued,
         svc.running()
     );
     ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], s).into_response()

@@ -20,6 +20,7 @@ use tokio_stream::wrappers::TcpListenerStream;
 use super::auth::Tenants;
 use super::grpc::{GrpcJobs, pb};
 use super::http::{HttpState, admin_router, router};
+use super::jobs::Role;
 use super::jobs::{Service, ServiceConfig, ServiceError};
 use super::runner::Models;
 use super::spec::Limits;
@@ -39,6 +40,10 @@ pub struct ServeConfig {
     pub data_dir: PathBuf,
     /// Where jobs and artefacts are stored.
     pub store: StoreLocation,
+    /// What this process does with the queue (api and worker need a shared store).
+    pub role: Role,
+    /// A worker's lease on a job without a heartbeat (shared store).
+    pub lease: Duration,
     /// Weights directory (`manifest.json`).
     pub weights: PathBuf,
     /// Jobs running at once.
@@ -63,12 +68,16 @@ pub struct ServeConfig {
 pub struct Server {
     cfg: ServeConfig,
     svc: Arc<Service>,
-    listeners: [TcpListener; 3],
+    /// HTTP and gRPC (absent for a worker), admin.
+    listeners: (Option<[TcpListener; 2]>, TcpListener),
 }
 
-/// The addresses actually bound.
+/// The addresses actually bound (a worker binds no HTTP or gRPC listener: those are
+/// `0.0.0.0:0` and `api` is false).
 #[derive(Debug, Clone, Copy)]
 pub struct BoundAddrs {
+    /// Whether the REST and gRPC listeners are served.
+    pub api: bool,
     /// REST.
     pub http: SocketAddr,
     /// gRPC.
@@ -111,6 +120,8 @@ impl Server {
             ServiceConfig {
                 data_dir: cfg.data_dir.clone(),
                 store: cfg.store.clone(),
+                role: cfg.role,
+                lease: cfg.lease,
                 max_running_jobs: cfg.max_running_jobs,
                 worker_threads: cfg.worker_threads,
                 queue_capacity: cfg.queue_capacity,
@@ -123,17 +134,22 @@ impl Server {
             },
         )
         .await?;
-        let listeners = [
-            TcpListener::bind(cfg.http)
-                .await
-                .map_err(io("HTTP", cfg.http))?,
-            TcpListener::bind(cfg.grpc)
-                .await
-                .map_err(io("gRPC", cfg.grpc))?,
-            TcpListener::bind(cfg.admin)
-                .await
-                .map_err(io("admin", cfg.admin))?,
-        ];
+        let api = if cfg.role.serves_api() {
+            Some([
+                TcpListener::bind(cfg.http)
+                    .await
+                    .map_err(io("HTTP", cfg.http))?,
+                TcpListener::bind(cfg.grpc)
+                    .await
+                    .map_err(io("gRPC", cfg.grpc))?,
+            ])
+        } else {
+            None
+        };
+        let admin = TcpListener::bind(cfg.admin)
+            .await
+            .map_err(io("admin", cfg.admin))?;
+        let listeners = (api, admin);
         Ok(Server {
             cfg,
             svc,
@@ -144,10 +160,13 @@ impl Server {
     /// The bound addresses.
     pub fn addrs(&self) -> BoundAddrs {
         let a = |l: &TcpListener, d: SocketAddr| l.local_addr().unwrap_or(d);
+        let none = SocketAddr::from(([0, 0, 0, 0], 0));
+        let (api, admin) = &self.listeners;
         BoundAddrs {
-            http: a(&self.listeners[0], self.cfg.http),
-            grpc: a(&self.listeners[1], self.cfg.grpc),
-            admin: a(&self.listeners[2], self.cfg.admin),
+            api: api.is_some(),
+            http: api.as_ref().map_or(none, |l| a(&l[0], self.cfg.http)),
+            grpc: api.as_ref().map_or(none, |l| a(&l[1], self.cfg.grpc)),
+            admin: a(admin, self.cfg.admin),
         }
     }
 
@@ -164,7 +183,7 @@ impl Server {
         let Server {
             cfg,
             svc,
-            listeners: [http_l, grpc_l, admin_l],
+            listeners: (api_l, admin_l),
         } = self;
         let tenants = Arc::new(cfg.tenants.clone());
         let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
@@ -190,6 +209,15 @@ impl Server {
                 let _ = stop_tx.send(true);
             });
         }
+        let admin = axum::serve(admin_l, admin_router(svc.clone())).with_graceful_shutdown(wait());
+        let Some([http_l, grpc_l]) = api_l else {
+            // A worker: the admin port only, until the drain ends.
+            admin
+                .await
+                .map_err(|e| ServiceError::Internal(format!("admin server: {e}")))?;
+            tracing::info!("stopped");
+            return Ok(());
+        };
         let http = axum::serve(
             http_l,
             router(HttpState {
@@ -199,7 +227,6 @@ impl Server {
             }),
         )
         .with_graceful_shutdown(wait());
-        let admin = axum::serve(admin_l, admin_router(svc.clone())).with_graceful_shutdown(wait());
         // Reflection in both versions (many clients still speak v1alpha), listing physnap's
         // service and the health service.
         let described = || {

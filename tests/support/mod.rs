@@ -10,7 +10,7 @@ use std::time::Duration;
 pub mod pg;
 
 use physnap::service::auth::Tenants;
-use physnap::service::jobs::Service;
+use physnap::service::jobs::{Role, Service};
 use physnap::service::server::{BoundAddrs, ServeConfig, Server};
 use physnap::service::store::StoreLocation;
 
@@ -28,6 +28,8 @@ pub struct Opts {
     pub max_body_bytes: usize,
     pub tokens: String,
     pub store: StoreLocation,
+    pub role: Role,
+    pub lease: Duration,
 }
 
 impl Default for Opts {
@@ -38,6 +40,8 @@ impl Default for Opts {
             max_body_bytes: 4 << 20,
             tokens: String::new(),
             store: StoreLocation::Sqlite,
+            role: Role::All,
+            lease: Duration::from_secs(15),
         }
     }
 }
@@ -79,6 +83,8 @@ pub fn serve_config(root: &Path, o: &Opts) -> ServeConfig {
         admin: loopback(),
         data_dir: root.join("data"),
         store: o.store.clone(),
+        role: o.role,
+        lease: o.lease,
         weights: root.join("weights"),
         max_running_jobs: o.max_running_jobs,
         worker_threads: 1,

@@ -65,6 +65,13 @@ impl Service {
         after: u64,
     ) -> Result<mpsc::Receiver<WatchItem>, ServiceError> {
         let rec = self.owned(tenant, id).await?;
+        if self.shared.is_some() && !rec.state.is_terminal() {
+            // The job may run in another process: follow it through notifications.
+            let live = lock(&self.live).contains_key(id);
+            if !live {
+                self.add_live(&rec);
+            }
+        }
         let (tx, rx) = mpsc::channel(16);
         let svc = self.clone();
         tokio::spawn(async move { svc.feed(rec, after, tx).await });

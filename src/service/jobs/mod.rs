@@ -32,6 +32,7 @@ use super::api::{self, JobList, JobView};
 use super::queue::{Full, QueueState};
 
 mod fanout;
+mod shared;
 
 use super::runner::{Models, Progress, RunError, run_job};
 use super::spec::{JobInput, Limits, ModelCaps, Violation, Violations, validate};
@@ -41,6 +42,8 @@ use super::store::{
 };
 use fanout::Live;
 pub use fanout::{Snapshot, WatchItem};
+pub use shared::Role;
+use shared::Shared;
 
 /// Settings of the job service.
 #[derive(Debug, Clone)]
@@ -49,6 +52,10 @@ pub struct ServiceConfig {
     pub data_dir: PathBuf,
     /// Where jobs and artefacts are stored.
     pub store: StoreLocation,
+    /// What this process does with the queue.
+    pub role: Role,
+    /// How long a worker's lease on a job lasts without a heartbeat (shared store).
+    pub lease: Duration,
     /// Jobs running at once.
     pub max_running_jobs: usize,
     /// Threads of the dedicated rayon pool.
@@ -199,6 +206,11 @@ pub struct Service {
     hard_stop: Arc<AtomicBool>,
     running: AtomicUsize,
     shutdown_tx: watch::Sender<bool>,
+    /// Set when the store is shared with other processes (PostgreSQL): the queue is the
+    /// store's, jobs run under leases, and news arrive by notification.
+    shared: Option<Shared>,
+    /// Jobs this process runs under a lease (shared store): id → attempt.
+    leased: Mutex<shared::Leased>,
     /// Counters.
     pub metrics: Metrics,
 }
@@ -272,6 +284,7 @@ impl Service {
         };
         let (shutdown_tx, _) = watch::channel(false);
         let queue = Mutex::new(QueueState::new(cfg.queue_capacity));
+        let shared = Shared::of(&cfg)?;
         let svc = Arc::new(Service {
             slots: Arc::new(Semaphore::new(cfg.max_running_jobs.max(1))),
             cfg,
@@ -286,14 +299,27 @@ impl Service {
             hard_stop: Arc::new(AtomicBool::new(false)),
             running: AtomicUsize::new(0),
             shutdown_tx,
+            shared,
+            leased: Mutex::new(Default::default()),
             metrics: Metrics::default(),
         });
-        let r = svc.clone();
-        tokio::task::spawn_blocking(move || r.recover())
-            .await
-            .map_err(|e| ServiceError::Internal(e.to_string()))??;
-        let d = svc.clone();
-        tokio::spawn(async move { d.dispatch().await });
+        if svc.shared.is_some() {
+            // No recovery pass: a job whose worker died is re-leased when its lease expires.
+            svc.start_listening().await?;
+        } else {
+            let r = svc.clone();
+            tokio::task::spawn_blocking(move || r.recover())
+                .await
+                .map_err(|e| ServiceError::Internal(e.to_string()))??;
+        }
+        if svc.cfg.role.runs_jobs() {
+            let d = svc.clone();
+            if svc.shared.is_some() {
+                tokio::spawn(async move { d.dispatch_shared().await });
+            } else {
+                tokio::spawn(async move { d.dispatch().await });
+            }
+        }
         Ok(svc)
     }
 
@@ -340,9 +366,13 @@ impl Service {
         &self.cfg.limits
     }
 
-    /// Jobs waiting.
-    pub fn queued(&self) -> usize {
-        lock(&self.queue).len()
+    /// Jobs waiting (in the shared store's queue, when shared).
+    pub async fn queued(&self) -> Result<usize, ServiceError> {
+        if self.shared.is_none() {
+            return Ok(lock(&self.queue).len());
+        }
+        let counts = self.db(|s| s.count_by_state()).await?;
+        Ok(shared::queued_of(&counts))
     }
 
     /// Jobs running.
@@ -446,7 +476,12 @@ impl Service {
             drop(store);
             return Ok((self.view(&rec), false));
         }
-        if let Err(Full { queued, capacity }) = lock(&self.queue).check_admit() {
+        let admit = if self.shared.is_some() {
+            shared::check_admit(store.as_mut(), self.cfg.queue_capacity)?
+        } else {
+            lock(&self.queue).check_admit()
+        };
+        if let Err(Full { queued, capacity }) = admit {
             return Err(ServiceError::QueueFull {
                 queued,
                 capacity,
@@ -476,7 +511,9 @@ impl Service {
         )?;
         drop(store);
         self.add_live(&rec);
-        lock(&self.queue).push(rec.id.clone());
+        if self.shared.is_none() {
+            lock(&self.queue).push(rec.id.clone());
+        }
         tracing::info!(job = %rec.id, tenant, seed = rec.spec.seed, "job admitted");
         Ok((self.view(&rec), true))
     }
@@ -563,17 +600,31 @@ impl Service {
         if let Some(l) = lock(&self.live).get(id) {
             l.cancel.store(true, Ordering::Relaxed);
         }
-        let removed = lock(&self.queue).remove(id);
+        let removed = if self.shared.is_some() {
+            rec.state == JobState::Queued
+        } else {
+            lock(&self.queue).remove(id)
+        };
         if removed {
+            let fence = self
+                .shared
+                .as_ref()
+                .map(|_| (JobState::Queued, rec.attempt));
             rec.state = JobState::Cancelled;
             rec.ended_ms = Some(now_ms());
             rec.failure = Some(JobFailure {
                 error_type: "cancelled".into(),
                 detail: "cancelled by request while queued".into(),
             });
-            let rec = self.finish(rec).await?;
-            self.metrics.cancelled.fetch_add(1, Ordering::Relaxed);
-            return Ok(self.view(&rec));
+            if let Some(rec) = self.finish(rec, fence).await? {
+                self.metrics.cancelled.fetch_add(1, Ordering::Relaxed);
+                return Ok(self.view(&rec));
+            }
+        }
+        if self.shared.is_some() {
+            // Running, or leased by a worker meanwhile: whichever worker runs it is told.
+            let key = id.to_string();
+            self.db(move |s| s.request_cancel(&key)).await?;
         }
         let key = id.to_string();
         let rec = self
@@ -681,6 +732,23 @@ impl Service {
         let evs = state_events(&mut rec);
         let r2 = rec.clone();
         self.db(move |s| s.update(&r2, &evs)).await?;
+        self.execute(rec, tx, cancel, None).await
+    }
+
+    /// Run a job to its end: progress to watchers, stop conditions, artefacts, the terminal
+    /// record. `fence`: the attempt of this process's lease (shared store), which every write
+    /// is conditional on and which a heartbeat keeps.
+    async fn execute(
+        self: Arc<Self>,
+        mut rec: JobRecord,
+        tx: Arc<watch::Sender<Arc<Snapshot>>>,
+        cancel: Arc<AtomicBool>,
+        fence: Option<u32>,
+    ) -> Result<(), ServiceError> {
+        let id = rec.id.clone();
+        let id = id.as_str();
+        let lost = Arc::new(AtomicBool::new(false));
+        let heartbeat = fence.map(|attempt| self.clone().heartbeat(id, attempt, &cancel, &lost));
         let seq = rec.sequence;
         tx.send_modify(|s| {
             *s = Arc::new(Snapshot {
@@ -692,7 +760,8 @@ impl Service {
         self.running.fetch_add(1, Ordering::Relaxed);
         let (models, pool, spec) = (self.models.clone(), self.pool.clone(), rec.spec.clone());
         let (hard, deadline_ms) = (self.hard_stop.clone(), rec.deadline_ms);
-        let (tx2, cancel2) = (tx.clone(), cancel.clone());
+        let (tx2, cancel2, lost2) = (tx.clone(), cancel.clone(), lost.clone());
+        let mut publish = self.progress_publisher(id);
         let svc = self.clone();
         let t0 = std::time::Instant::now();
         let out = tokio::task::spawn_blocking(move || {
@@ -703,6 +772,7 @@ impl Service {
                         &spec,
                         &mut |p| {
                             svc.metrics.steps.fetch_add(1, Ordering::Relaxed);
+                            publish(&svc, p);
                             tx2.send_modify(|s| {
                                 let mut n = (**s).clone();
                                 if p.preview.is_some() {
@@ -717,7 +787,9 @@ impl Service {
                             });
                         },
                         &|| {
-                            if cancel2.load(Ordering::Relaxed) {
+                            if lost2.load(Ordering::Relaxed) {
+                                Some("lease lost".into())
+                            } else if cancel2.load(Ordering::Relaxed) {
                                 Some("cancelled by request".into())
                             } else if hard.load(Ordering::Relaxed) {
                                 Some("server shutting down".into())
@@ -732,6 +804,9 @@ impl Service {
             })
         })
         .await;
+        if let Some(h) = heartbeat {
+            h.abort();
+        }
         self.running.fetch_sub(1, Ordering::Relaxed);
         let progress = tx.borrow().progress.clone();
         let at = progress
@@ -761,6 +836,10 @@ impl Service {
             Ok(Ok(Ok(output))) => {
                 let key = id.to_string();
                 let files = output.files;
+                if lost.load(Ordering::Relaxed) {
+                    tracing::warn!(job = %id, "lease lost before the artefacts were stored; another worker re-runs it");
+                    return Ok(());
+                }
                 let artifacts = self.db(move |s| s.put_artifacts(&key, &files)).await;
                 match artifacts {
                     Ok(a) => {
@@ -780,16 +859,17 @@ impl Service {
                 }
             }
             Ok(Ok(Err(RunError::Stopped(reason)))) => {
-                if cancel.load(Ordering::Relaxed) {
+                if lost.load(Ordering::Relaxed) {
+                    tracing::warn!(job = %id, "lease lost {at}; another worker re-runs it");
+                    return Ok(());
+                } else if cancel.load(Ordering::Relaxed) {
                     rec.state = JobState::Cancelled;
                     rec.failure = Some(JobFailure {
                         error_type: "cancelled".into(),
                         detail: format!("cancelled by request {at}"),
                     });
                 } else if self.hard_stop.load(Ordering::Relaxed) {
-                    // Left RUNNING on purpose: the next start re-runs it from the beginning.
-                    tracing::warn!(job = %id, "stopped by shutdown {at}; it re-runs on restart");
-                    return Ok(());
+                    return self.stopped_by_shutdown(rec, fence, &at).await;
                 } else {
                     rec.state = JobState::Failed;
                     rec.failure = Some(JobFailure {
@@ -816,11 +896,21 @@ impl Service {
         }
         .fetch_add(1, Ordering::Relaxed);
         tracing::info!(job = %id, state = rec.state.as_str(), "job finished");
-        self.finish(rec).await.map(|_| ())
+        let fence = fence.map(|attempt| (JobState::Running, attempt));
+        if self.finish(rec, fence).await?.is_none() {
+            tracing::warn!(job = %id, "lease lost: another worker's attempt owns the job; this result is dropped");
+        }
+        Ok(())
     }
 
     /// Commit a terminal record (artefact events, state, done) and retire its live entry.
-    async fn finish(&self, mut rec: JobRecord) -> Result<JobRecord, ServiceError> {
+    /// With a `fence` (state, attempt) the write happens only while the stored job is still
+    /// there; `None` when it was fenced out (nothing written, the live entry kept).
+    async fn finish(
+        &self,
+        mut rec: JobRecord,
+        fence: Option<(JobState, u32)>,
+    ) -> Result<Option<JobRecord>, ServiceError> {
         let mut evs = Vec::new();
         for a in rec.artifacts.clone() {
             rec.sequence += 1;
@@ -829,7 +919,15 @@ impl Service {
         }
         evs.extend(state_events(&mut rec));
         let r2 = rec.clone();
-        self.db(move |s| s.update(&r2, &evs)).await?;
+        let written = self
+            .db(move |s| match fence {
+                Some((state, attempt)) => s.update_if(&r2, &evs, state, attempt),
+                None => s.update(&r2, &evs).map(|_| true),
+            })
+            .await?;
+        if !written {
+            return Ok(None);
+        }
         if let Some(l) = lock(&self.live).remove(&rec.id) {
             let seq = rec.sequence;
             l.tx.send_modify(|s| {
@@ -839,7 +937,7 @@ impl Service {
                 })
             });
         }
-        Ok(rec)
+        Ok(Some(rec))
     }
 
     /// Stop admitting (503), let running jobs finish for up to `drain`, then stop them at their

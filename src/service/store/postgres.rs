@@ -74,7 +74,23 @@ const CONNECT_TIMEOUT: Duration = Duration::from_secs(10);
 /// The PostgreSQL job store.
 pub struct PgStore {
     config: Config,
-    client: Client,
+    /// Always `Some` until dropped (see the `Drop` impl).
+    client: Option<Client>,
+}
+
+/// The synchronous client closes its connection with a `block_on` of its own, which tokio
+/// forbids on a runtime thread, where the service's last handle may well be dropped: there
+/// the client is closed on a thread of its own.
+impl Drop for PgStore {
+    fn drop(&mut self) {
+        if let Some(c) = self.client.take()
+            && tokio::runtime::Handle::try_current().is_ok()
+        {
+            let _ = std::thread::Builder::new()
+                .name("physnap-pg-close".into())
+                .spawn(move || drop(c));
+        }
+    }
 }
 
 fn raw(r: &postgres::Row) -> RawJob {
@@ -105,17 +121,22 @@ impl PgStore {
         }
         config.application_name("physnap");
         let client = config.connect(NoTls)?;
-        let mut store = PgStore { config, client };
+        let mut store = PgStore {
+            config,
+            client: Some(client),
+        };
         store.migrate()?;
         Ok(store)
     }
 
     /// The schema version the database is at now.
     pub fn schema_version(&mut self) -> Result<i32, StoreError> {
-        Ok(self
-            .client()?
-            .query_one("SELECT COALESCE(MAX(version), 0) FROM physnap_schema", &[])?
-            .get(0))
+        self.with(|c| {
+            Ok(
+                c.query_one("SELECT COALESCE(MAX(version), 0) FROM physnap_schema", &[])?
+                    .get(0),
+            )
+        })
     }
 
     fn migrate(&mut self) -> Result<(), StoreError> {
@@ -146,13 +167,31 @@ impl PgStore {
         Ok(())
     }
 
+    /// Run `f` on the connection; when the server had dropped it (a restart, a failover, an
+    /// idle timeout), reconnect and run `f` once more. Every write is safe to repeat: a
+    /// repeated insert or event fails on its key, a repeated lease at worst leaves a lease
+    /// that expires.
+    fn with<T>(
+        &mut self,
+        mut f: impl FnMut(&mut Client) -> Result<T, StoreError>,
+    ) -> Result<T, StoreError> {
+        match f(self.client()?) {
+            Err(StoreError::Postgres(e)) if e.is_closed() => {
+                tracing::warn!("job store: PostgreSQL connection lost ({e}); reconnecting");
+                self.client = Some(self.config.connect(NoTls)?);
+                f(self.client()?)
+            }
+            other => other,
+        }
+    }
+
     /// The connection, re-opened if the server dropped it.
     fn client(&mut self) -> Result<&mut Client, StoreError> {
-        if self.client.is_closed() {
+        if self.client.as_ref().is_none_or(Client::is_closed) {
             tracing::warn!("job store: PostgreSQL connection lost; reconnecting");
-            self.client = self.config.connect(NoTls)?;
+            self.client = Some(self.config.connect(NoTls)?);
         }
-        Ok(&mut self.client)
+        Ok(self.client.as_mut().expect("set just above"))
     }
 
     /// Write the job's mutable fields and append `events`, only while the stored job is in
@@ -168,33 +207,35 @@ impl PgStore {
             Some((s, a)) => (Some(s.as_str()), Some(i64::from(a))),
             None => (None, None),
         };
-        let mut tx = self.client()?.transaction()?;
-        let n = tx.execute(
-            "UPDATE jobs SET state = $2, started_ms = $3, ended_ms = $4, attempt = $5, sequence = $6, \
-             error_type = $7, error_detail = $8, artifacts = $9, \
-             lease_owner = CASE WHEN $2 = 'RUNNING' THEN lease_owner END, \
-             lease_expires_ms = CASE WHEN $2 = 'RUNNING' THEN lease_expires_ms END \
-             WHERE id = $1 AND ($10::TEXT IS NULL OR state = $10) AND ($11::BIGINT IS NULL OR attempt = $11)",
-            &[
-                &j.id,
-                &j.state,
-                &j.started_ms,
-                &j.ended_ms,
-                &j.attempt,
-                &j.sequence,
-                &j.error_type,
-                &j.error_detail,
-                &j.artifacts,
-                &state,
-                &attempt,
-            ],
-        )?;
-        if n == 0 && expect.is_some() {
-            return Ok(false);
-        }
-        append_events(&mut tx, &job.id, events)?;
-        tx.commit()?;
-        Ok(true)
+        self.with(|c| {
+            let mut tx = c.transaction()?;
+            let n = tx.execute(
+                "UPDATE jobs SET state = $2, started_ms = $3, ended_ms = $4, attempt = $5, sequence = $6, \
+                 error_type = $7, error_detail = $8, artifacts = $9, \
+                 lease_owner = CASE WHEN $2 = 'RUNNING' THEN lease_owner END, \
+                 lease_expires_ms = CASE WHEN $2 = 'RUNNING' THEN lease_expires_ms END \
+                 WHERE id = $1 AND ($10::TEXT IS NULL OR state = $10) AND ($11::BIGINT IS NULL OR attempt = $11)",
+                &[
+                    &j.id,
+                    &j.state,
+                    &j.started_ms,
+                    &j.ended_ms,
+                    &j.attempt,
+                    &j.sequence,
+                    &j.error_type,
+                    &j.error_detail,
+                    &j.artifacts,
+                    &state,
+                    &attempt,
+                ],
+            )?;
+            if n == 0 && expect.is_some() {
+                return Ok(false);
+            }
+            append_events(&mut tx, &job.id, events)?;
+            tx.commit()?;
+            Ok(true)
+        })
     }
 
     fn query_jobs(
@@ -202,11 +243,12 @@ impl PgStore {
         sql: &str,
         params: &[&(dyn postgres::types::ToSql + Sync)],
     ) -> Result<Vec<JobRecord>, StoreError> {
-        self.client()?
-            .query(sql, params)?
-            .iter()
-            .map(|r| raw(r).decode())
-            .collect()
+        self.with(|c| {
+            c.query(sql, params)?
+                .iter()
+                .map(|r| raw(r).decode())
+                .collect()
+        })
     }
 }
 
@@ -222,37 +264,39 @@ impl JobStore for PgStore {
         idempotency: Option<(&str, &str)>,
     ) -> Result<(), StoreError> {
         let j = RawJob::encode(job);
-        let mut tx = self.client()?.transaction()?;
-        tx.execute(
-            &format!(
-                "INSERT INTO jobs ({COLUMNS}) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14)"
-            ),
-            &[
-                &j.id,
-                &j.tenant,
-                &j.state,
-                &j.spec,
-                &j.points,
-                &j.created_ms,
-                &j.started_ms,
-                &j.ended_ms,
-                &j.deadline_ms,
-                &j.attempt,
-                &j.sequence,
-                &j.error_type,
-                &j.error_detail,
-                &j.artifacts,
-            ],
-        )?;
-        if let Some((key, hash)) = idempotency {
+        self.with(|c| {
+            let mut tx = c.transaction()?;
             tx.execute(
-                "INSERT INTO idempotency (tenant, key, request_hash, job_id) VALUES ($1, $2, $3, $4)",
-                &[&job.tenant, &key, &hash, &job.id],
+                &format!(
+                    "INSERT INTO jobs ({COLUMNS}) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14)"
+                ),
+                &[
+                    &j.id,
+                    &j.tenant,
+                    &j.state,
+                    &j.spec,
+                    &j.points,
+                    &j.created_ms,
+                    &j.started_ms,
+                    &j.ended_ms,
+                    &j.deadline_ms,
+                    &j.attempt,
+                    &j.sequence,
+                    &j.error_type,
+                    &j.error_detail,
+                    &j.artifacts,
+                ],
             )?;
-        }
-        append_events(&mut tx, &job.id, events)?;
-        tx.commit()?;
-        Ok(())
+            if let Some((key, hash)) = idempotency {
+                tx.execute(
+                    "INSERT INTO idempotency (tenant, key, request_hash, job_id) VALUES ($1, $2, $3, $4)",
+                    &[&job.tenant, &key, &hash, &job.id],
+                )?;
+            }
+            append_events(&mut tx, &job.id, events)?;
+            tx.commit()?;
+            Ok(())
+        })
     }
 
     fn update(&mut self, job: &JobRecord, events: &[StoredEvent]) -> Result<(), StoreError> {
@@ -285,16 +329,16 @@ impl JobStore for PgStore {
                  ORDER BY id COLLATE \"C\" LIMIT 1 FOR UPDATE SKIP LOCKED) \
              RETURNING {COLUMNS}, cancel_requested"
         );
-        let row = self
-            .client()?
-            .query_opt(&sql, &[&worker, &now_ms, &(now_ms + lease_ms)])?;
-        row.map(|r| {
-            Ok(Lease {
-                cancel_requested: r.get(14),
-                job: raw(&r).decode()?,
+        self.with(|c| {
+            let row = c.query_opt(&sql, &[&worker, &now_ms, &(now_ms + lease_ms)])?;
+            row.map(|r| {
+                Ok(Lease {
+                    cancel_requested: r.get(14),
+                    job: raw(&r).decode()?,
+                })
             })
+            .transpose()
         })
-        .transpose()
     }
 
     fn heartbeat(
@@ -304,31 +348,34 @@ impl JobStore for PgStore {
         now_ms: i64,
         lease_ms: i64,
     ) -> Result<Option<bool>, StoreError> {
-        Ok(self
-            .client()?
-            .query_opt(
-                "UPDATE jobs SET lease_expires_ms = $3 \
-                 WHERE id = $1 AND attempt = $2 AND state = 'RUNNING' RETURNING cancel_requested",
-                &[&id, &i64::from(attempt), &(now_ms + lease_ms)],
-            )?
-            .map(|r| r.get(0)))
+        self.with(|c| {
+            Ok(c.query_opt(
+                    "UPDATE jobs SET lease_expires_ms = $3 \
+                     WHERE id = $1 AND attempt = $2 AND state = 'RUNNING' RETURNING cancel_requested",
+                    &[&id, &i64::from(attempt), &(now_ms + lease_ms)],
+                )?
+                .map(|r| r.get(0)))
+        })
     }
 
     fn request_cancel(&mut self, id: &str) -> Result<(), StoreError> {
-        let mut tx = self.client()?.transaction()?;
-        tx.execute(
-            "UPDATE jobs SET cancel_requested = TRUE WHERE id = $1",
-            &[&id],
-        )?;
-        tx.execute("SELECT pg_notify($1, $2)", &[&Channel::Cancel.name(), &id])?;
-        tx.commit()?;
-        Ok(())
+        self.with(|c| {
+            let mut tx = c.transaction()?;
+            tx.execute(
+                "UPDATE jobs SET cancel_requested = TRUE WHERE id = $1",
+                &[&id],
+            )?;
+            tx.execute("SELECT pg_notify($1, $2)", &[&Channel::Cancel.name(), &id])?;
+            tx.commit()?;
+            Ok(())
+        })
     }
 
     fn notify(&mut self, channel: Channel, payload: &str) -> Result<(), StoreError> {
-        self.client()?
-            .execute("SELECT pg_notify($1, $2)", &[&channel.name(), &payload])?;
-        Ok(())
+        self.with(|c| {
+            c.execute("SELECT pg_notify($1, $2)", &[&channel.name(), &payload])?;
+            Ok(())
+        })
     }
 
     fn idempotency(
@@ -336,13 +383,13 @@ impl JobStore for PgStore {
         tenant: &str,
         key: &str,
     ) -> Result<Option<(String, String)>, StoreError> {
-        Ok(self
-            .client()?
-            .query_opt(
+        self.with(|c| {
+            Ok(c.query_opt(
                 "SELECT request_hash, job_id FROM idempotency WHERE tenant = $1 AND key = $2",
                 &[&tenant, &key],
             )?
             .map(|r| (r.get(0), r.get(1))))
+        })
     }
 
     fn get(&mut self, id: &str) -> Result<Option<JobRecord>, StoreError> {
@@ -373,38 +420,42 @@ impl JobStore for PgStore {
 
     fn events_after(&mut self, id: &str, after: u64) -> Result<Vec<StoredEvent>, StoreError> {
         let after = i64::try_from(after).unwrap_or(i64::MAX);
-        Ok(self
-            .client()?
-            .query(
-                "SELECT sequence, kind, data FROM events WHERE job_id = $1 AND sequence > $2 ORDER BY sequence",
-                &[&id, &after],
-            )?
-            .iter()
-            .map(|r| StoredEvent {
-                sequence: r.get::<_, i64>(0) as u64,
-                kind: r.get(1),
-                data: r.get(2),
-            })
-            .collect())
+        self.with(|c| {
+            Ok(c.query(
+                    "SELECT sequence, kind, data FROM events WHERE job_id = $1 AND sequence > $2 ORDER BY sequence",
+                    &[&id, &after],
+                )?
+                .iter()
+                .map(|r| StoredEvent {
+                    sequence: r.get::<_, i64>(0) as u64,
+                    kind: r.get(1),
+                    data: r.get(2),
+                })
+                .collect())
+        })
     }
 
     fn delete(&mut self, id: &str) -> Result<(), StoreError> {
-        let mut tx = self.client()?.transaction()?;
-        for table in ["events", "idempotency", "artifact_data", "jobs"] {
-            let key = if table == "jobs" { "id" } else { "job_id" };
-            tx.execute(&format!("DELETE FROM {table} WHERE {key} = $1"), &[&id])?;
-        }
-        tx.commit()?;
-        Ok(())
+        self.with(|c| {
+            let mut tx = c.transaction()?;
+            for table in ["events", "idempotency", "artifact_data", "jobs"] {
+                let key = if table == "jobs" { "id" } else { "job_id" };
+                tx.execute(&format!("DELETE FROM {table} WHERE {key} = $1"), &[&id])?;
+            }
+            tx.commit()?;
+            Ok(())
+        })
     }
 
     fn count_by_state(&mut self) -> Result<Vec<(String, u64)>, StoreError> {
-        Ok(self
-            .client()?
-            .query("SELECT state, COUNT(*) FROM jobs GROUP BY state", &[])?
-            .iter()
-            .map(|r| (r.get(0), r.get::<_, i64>(1) as u64))
-            .collect())
+        self.with(|c| {
+            Ok(
+                c.query("SELECT state, COUNT(*) FROM jobs GROUP BY state", &[])?
+                    .iter()
+                    .map(|r| (r.get(0), r.get::<_, i64>(1) as u64))
+                    .collect(),
+            )
+        })
     }
 
     fn put_artifacts(
@@ -412,26 +463,28 @@ impl JobStore for PgStore {
         id: &str,
         files: &[(String, Vec<u8>)],
     ) -> Result<Vec<Artifact>, StoreError> {
-        let mut tx = self.client()?.transaction()?;
-        for (name, bytes) in files {
-            tx.execute(
-                "INSERT INTO artifact_data (job_id, name, bytes) VALUES ($1, $2, $3) \
-                 ON CONFLICT (job_id, name) DO UPDATE SET bytes = EXCLUDED.bytes",
-                &[&id, name, bytes],
-            )?;
-        }
-        tx.commit()?;
-        Ok(files.iter().map(|(n, b)| artifact_record(n, b)).collect())
+        self.with(|c| {
+            let mut tx = c.transaction()?;
+            for (name, bytes) in files {
+                tx.execute(
+                    "INSERT INTO artifact_data (job_id, name, bytes) VALUES ($1, $2, $3) \
+                     ON CONFLICT (job_id, name) DO UPDATE SET bytes = EXCLUDED.bytes",
+                    &[&id, name, bytes],
+                )?;
+            }
+            tx.commit()?;
+            Ok(files.iter().map(|(n, b)| artifact_record(n, b)).collect())
+        })
     }
 
     fn artifact(&mut self, id: &str, name: &str) -> Result<Option<Vec<u8>>, StoreError> {
-        Ok(self
-            .client()?
-            .query_opt(
+        self.with(|c| {
+            Ok(c.query_opt(
                 "SELECT bytes FROM artifact_data WHERE job_id = $1 AND name = $2",
                 &[&id, &name],
             )?
             .map(|r| r.get(0)))
+        })
     }
 }
 

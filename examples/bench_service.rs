@@ -132,7 +132,7 @@ async fn main() {
          queue entry + live watch; the cloud itself lives in SQLite)",
         rss0,
         rss1,
-        s.svc.queued(),
+        s.svc.queued().await.unwrap(),
         (rss1 as f64 - rss0 as f64) / n as f64
     );
     let db = support::data_dir(&s).join("jobs.sqlite3");

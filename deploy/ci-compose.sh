@@ -19,7 +19,10 @@
 #      check_urdf, a gRPC WatchJob (h2c) of the same job with the `physnap watch` client;
 #   4. a job accepted before `podman-compose restart physnap` finishes after it, and the first
 #      job's artefacts are still served (the data volume is kept);
-#   5. prints the image sizes, the time from `up` to healthy and one job's time through the
+#   5. the scale-out profile: PostgreSQL (deploy/Containerfile.postgres) + 2 API replicas + 3
+#      workers behind deploy/Caddyfile.scale; jobs submitted through that gateway are spread
+#      over the workers and streamed to `done` by whichever API replica answers;
+#   6. prints the image sizes, the time from `up` to healthy and one job's time through the
 #      gateway; with PHYSNAP_CI_COMPARE=1 also directly (the container's address on the
 #      compose network).
 # Needs podman, podman-compose, mmdebstrap, runc, curl, python3, node with the validator
@@ -35,6 +38,8 @@ TOKEN=ci-token-$RANDOM$RANDOM
 WORK=$(mktemp -d /tmp/physnap-ci-compose.XXXXXX)
 PHYSNAP_CTR=${PROJECT}_physnap_1
 GATEWAY_CTR=${PROJECT}_gateway_1
+SCALE_SERVICES=(postgres api1 api2 worker1 worker2 worker3 gateway-scale)
+SCALE_PORT=${PHYSNAP_SCALE_GATEWAY_PORT:-18081}
 T0=$(date +%s)
 
 say() { echo "ci-compose: $*"; }
@@ -60,20 +65,24 @@ EOF
 export CONTAINERS_CONF=$WORK/containers.conf
 # Docker-format images keep the HEALTHCHECK instruction (OCI images drop it).
 export BUILDAH_FORMAT=docker
-export PHYSNAP_TOKENS_FILE_ON_HOST=$WORK/tokens.txt PHYSNAP_GATEWAY_PORT=$PORT
+export PHYSNAP_TOKENS_FILE_ON_HOST=$WORK/tokens.txt PHYSNAP_GATEWAY_PORT=$PORT \
+  PHYSNAP_SCALE_GATEWAY_PORT=$SCALE_PORT PHYSNAP_DB_PASSWORD=ci-db-$RANDOM$RANDOM
 COMPOSE=(podman-compose -p "$PROJECT" -f deploy/docker-compose.yml -f deploy/compose.local.yml)
 
 teardown() {
   local rc=$?
   if [ "$rc" != 0 ]; then
-    for c in "$PHYSNAP_CTR" "$GATEWAY_CTR"; do
+    for c in "$PHYSNAP_CTR" "$GATEWAY_CTR" "${SCALE_SERVICES[@]/#/${PROJECT}_}"; do
+      c=${c%_1}_1
       echo "----- logs of $c -----" >&2
       podman logs --tail 200 "$c" >&2 2>&1 || true
     done
   fi
   "${COMPOSE[@]}" down -v -t 5 >/dev/null 2>&1 || true
   podman rm -f -i "$PHYSNAP_CTR" "$GATEWAY_CTR" >/dev/null 2>&1 || true
-  podman volume rm -f "${PROJECT}_physnap-data" "${PROJECT}_caddy-data" >/dev/null 2>&1 || true
+  for svc in "${SCALE_SERVICES[@]}"; do podman rm -f -i "${PROJECT}_${svc}_1" >/dev/null 2>&1 || true; done
+  podman volume rm -f "${PROJECT}_physnap-data" "${PROJECT}_caddy-data" "${PROJECT}_postgres-data" \
+    >/dev/null 2>&1 || true
   podman network rm -f "${PROJECT}_default" >/dev/null 2>&1 || true
   local left
   left=$(podman ps -a -q --filter "label=io.podman.compose.project=$PROJECT"
@@ -109,6 +118,8 @@ say "building localhost/physnap:local from $BIN"
 podman build -q -f deploy/Containerfile.prebuilt -t localhost/physnap:local "$WORK/ctx" >/dev/null
 say "building localhost/physnap-gateway:local (Debian's caddy)"
 podman build -q -f deploy/Containerfile.gateway -t localhost/physnap-gateway:local deploy >/dev/null
+say "building localhost/physnap-postgres:local (Debian's postgresql)"
+podman build -q -f deploy/Containerfile.postgres -t localhost/physnap-postgres:local deploy >/dev/null
 
 # ---- 2. up -------------------------------------------------------------------------------
 echo "ci $TOKEN" >"$PHYSNAP_TOKENS_FILE_ON_HOST"
@@ -117,15 +128,16 @@ chmod 644 "$PHYSNAP_TOKENS_FILE_ON_HOST"
 "${COMPOSE[@]}" down -v -t 1 >/dev/null 2>&1 || true
 say "podman-compose up"
 t_up=$(date +%s.%N)
-"${COMPOSE[@]}" up -d --no-build >"$WORK/up.log" 2>&1 || {
+"${COMPOSE[@]}" up -d --no-build physnap gateway >"$WORK/up.log" 2>&1 || {
   cat "$WORK/up.log" >&2
   fail "podman-compose up"
 }
 
-wait_healthy() {
+wait_healthy() { # [container] (default: physnap's)
+  local ctr=${1:-$PHYSNAP_CTR}
   local deadline=$(($(date +%s) + 90))
-  until podman healthcheck run "$PHYSNAP_CTR" >/dev/null 2>&1; do
-    [ "$(date +%s)" -lt "$deadline" ] || fail "$PHYSNAP_CTR not healthy after 90 s"
+  until podman healthcheck run "$ctr" >/dev/null 2>&1; do
+    [ "$(date +%s)" -lt "$deadline" ] || fail "$ctr not healthy after 90 s"
     sleep 0.5
   done
 }
@@ -232,7 +244,47 @@ curl -sf "${AUTH[@]}" -o "$WORK/model-again.glb" "$GW/v1/jobs/$ID/artifacts/mode
   fail "job $ID's model.glb changed across the restart"
 say "after the restart: $A and $B SUCCEEDED; $ID's model.glb is unchanged (volume kept)"
 
-# ---- 5. facts ----------------------------------------------------------------------------
+# ---- 5. scale-out -------------------------------------------------------------------------
+say "podman-compose up of the scale profile: ${SCALE_SERVICES[*]}"
+t_up=$(date +%s.%N)
+"${COMPOSE[@]}" up -d --no-build "${SCALE_SERVICES[@]}" >"$WORK/up-scale.log" 2>&1 || {
+  cat "$WORK/up-scale.log" >&2
+  fail "podman-compose up (scale)"
+}
+for svc in api1 api2 worker1 worker2 worker3; do wait_healthy "${PROJECT}_${svc}_1"; done
+SGW=http://127.0.0.1:$SCALE_PORT
+deadline=$(($(date +%s) + 30))
+until [ "$(curl -s -o /dev/null -w '%{http_code}' "$SGW/v1/categories")" = 200 ]; do
+  [ "$(date +%s)" -lt "$deadline" ] || fail "the scale gateway does not answer on $SGW"
+  sleep 0.5
+done
+say "scale profile healthy $(python3 -c "print(f'{$(date +%s.%N) - $t_up:.1f}')") s after up"
+ids=()
+for seed in 11 12 13 14 15 16; do ids+=("$(submit "$SGW" "$seed")"); done
+for j in "${ids[@]}"; do
+  state=$(follow "$SGW" "$j")
+  [ "$state" = SUCCEEDED ] || fail "scale job $j ended $state"
+done
+grep -q '^event: progress' "$WORK/sse-${ids[0]}.txt" ||
+  fail "no progress from a worker reached an API replica's SSE stream"
+ran=0
+for svc in worker1 worker2 worker3; do
+  n=$(podman logs "${PROJECT}_${svc}_1" 2>&1 | grep -c 'job leased' || true)
+  say "$svc ran $n job(s)"
+  [ "$n" -gt 0 ] && ran=$((ran + 1))
+done
+[ "$ran" -ge 2 ] || fail "the jobs were not spread over the workers"
+for svc in api1 api2; do
+  n=$(podman logs "${PROJECT}_${svc}_1" 2>&1 | grep -c 'job leased' || true)
+  [ "$n" = 0 ] || fail "the API replica $svc ran jobs"
+done
+curl -sf "${AUTH[@]}" -o "$WORK/scale.glb" "$SGW/v1/jobs/${ids[0]}/artifacts/model.glb" ||
+  fail "downloading a scale job's model.glb"
+"$BIN" watch "${ids[1]}" --server "$SGW" --token "$TOKEN" 2>"$WORK/watch-scale.txt" ||
+  fail "gRPC WatchJob through the scale gateway: $(cat "$WORK/watch-scale.txt")"
+say "scale: ${#ids[@]} jobs through 2 API replicas on $ran of 3 workers, all SUCCEEDED; SSE, gRPC and artefacts through the gateway"
+
+# ---- 6. facts ----------------------------------------------------------------------------
 podman images --format '{{.Repository}}:{{.Tag}} {{.Size}}' |
   grep -E '^localhost/(debian:bookworm-slim|physnap:local|physnap-gateway:local) ' |
   sed 's/^/ci-compose: image /'

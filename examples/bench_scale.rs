@@ -14,7 +14,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use physnap::service::jobs::Role;
 use physnap::service::store::StoreLocation;
 use serde_json::{Value, json};
-use support::{Opts, SseReader, TestServer, cloud, start};
+use support::{Opts, SseReader, TestServer, cloud, start, submit_json};
 
 fn now_ms() -> f64 {
     SystemTime::now()
@@ -27,15 +27,6 @@ fn now_ms() -> f64 {
 fn median(v: &mut [f64]) -> f64 {
     v.sort_by(|a, b| a.total_cmp(b));
     v[v.len() / 2]
-}
-
-async fn submit(c: &reqwest::Client, api: &TestServer, body: &Value) -> String {
-    let r = c.post(api.url("/v1/jobs")).json(body).send().await.unwrap();
-    assert_eq!(r.status(), 202);
-    r.json::<Value>().await.unwrap()["id"]
-        .as_str()
-        .unwrap()
-        .to_string()
 }
 
 /// Follow a job's SSE stream to `done`; the `done` event's job and when it arrived (Unix ms).
@@ -89,7 +80,7 @@ async fn main() {
         let t0 = Instant::now();
         let mut ids = Vec::new();
         for i in 0..jobs {
-            ids.push(submit(&c, &api, &body(i)).await);
+            ids.push(submit_json(&c, &api, &body(i)).await);
         }
         let mut runs = Vec::new();
         for id in &ids {
@@ -111,7 +102,7 @@ async fn main() {
             let (mut lease, mut notify) = (Vec::new(), Vec::new());
             for i in 0..probes {
                 tokio::time::sleep(Duration::from_millis(300)).await;
-                let id = submit(&c, &api, &body(1000 + i)).await;
+                let id = submit_json(&c, &api, &body(1000 + i)).await;
                 let (done, arrived) = follow(&c, &api, &id).await;
                 lease.push(
                     done["start_time_ms"].as_f64().unwrap()

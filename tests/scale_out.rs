@@ -12,16 +12,7 @@ use physnap::service::jobs::Role;
 use physnap::service::server::Server;
 use physnap::service::store::StoreLocation;
 use serde_json::{Value, json};
-use support::{Opts, SseReader, TestServer, cloud};
-
-async fn submit(c: &reqwest::Client, api: &TestServer, body: &Value) -> String {
-    let r = c.post(api.url("/v1/jobs")).json(body).send().await.unwrap();
-    assert_eq!(r.status(), 202);
-    r.json::<Value>().await.unwrap()["id"]
-        .as_str()
-        .unwrap()
-        .to_string()
-}
+use support::{Opts, TestServer, cloud, events_of, submit_json};
 
 async fn job(c: &reqwest::Client, api: &TestServer, id: &str) -> Value {
     c.get(api.url(&format!("/v1/jobs/{id}")))
@@ -76,17 +67,10 @@ async fn two_workers_share_the_queue_and_the_api_replica_streams_and_cancels() {
     };
     let mut ids = Vec::new();
     for seed in 0..6 {
-        ids.push(submit(&c, &api, &body(seed)).await);
+        ids.push(submit_json(&c, &api, &body(seed)).await);
     }
     // The API replica streams a job running in a worker: progress, then done.
-    let events = SseReader::new(
-        c.get(api.url(&format!("/v1/jobs/{}/events", ids[0])))
-            .send()
-            .await
-            .unwrap(),
-    )
-    .collect()
-    .await;
+    let events = events_of(&c, &api, &ids[0]).await;
     assert!(
         events.iter().any(|e| e.event == "progress"),
         "no progress reached the API replica"
@@ -96,14 +80,7 @@ async fn two_workers_share_the_queue_and_the_api_replica_streams_and_cancels() {
         let j = wait_state(&c, &api, id, &["SUCCEEDED", "FAILED", "CANCELLED"]).await;
         assert_eq!(j["state"], "SUCCEEDED", "{j:#}");
         assert_eq!(j["attempt"], 1, "run more than once: {j:#}");
-        let events = SseReader::new(
-            c.get(api.url(&format!("/v1/jobs/{id}/events")))
-                .send()
-                .await
-                .unwrap(),
-        )
-        .collect()
-        .await;
+        let events = events_of(&c, &api, id).await;
         let states: Vec<&str> = events
             .iter()
             .filter(|e| e.event == "state")
@@ -151,7 +128,7 @@ async fn two_workers_share_the_queue_and_the_api_replica_streams_and_cancels() {
     let mut long = body(99);
     long["steps"] = json!(1000);
     long["samples"] = json!(8);
-    let id = submit(&c, &api, &long).await;
+    let id = submit_json(&c, &api, &long).await;
     wait_state(&c, &api, &id, &["RUNNING"]).await;
     let r = c
         .post(api.url(&format!("/v1/jobs/{id}/cancel")))
@@ -177,15 +154,8 @@ async fn two_workers_share_the_queue_and_the_api_replica_streams_and_cancels() {
         .len() as i64
     });
     assert!(killed >= 6, "{killed} connections terminated");
-    let id = submit(&c, &api, &body(7)).await;
-    let events = SseReader::new(
-        c.get(api.url(&format!("/v1/jobs/{id}/events")))
-            .send()
-            .await
-            .unwrap(),
-    )
-    .collect()
-    .await;
+    let id = submit_json(&c, &api, &body(7)).await;
+    let events = events_of(&c, &api, &id).await;
     assert_eq!(events.last().unwrap().event, "done");
     let j = job(&c, &api, &id).await;
     assert_eq!(j["state"], "SUCCEEDED", "{j:#}");

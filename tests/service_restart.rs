@@ -83,6 +83,85 @@ fn glb_sha(j: &Value) -> String {
         .to_string()
 }
 
+/// The paper's 1000-step sampler: a long job that is surely still running at step 100.
+fn long_job() -> Value {
+    json!({"points": cloud(30), "seed": 11, "samples": 6, "resolution": 8,
+           "sampler": "ddpm", "steps": 1000,
+           "category": "Door", "w_pc": 0.0, "w_pen": 0.0, "w_mob": 0.0})
+}
+
+/// POST a job to the server at `http`; its id.
+async fn submit(c: &reqwest::Client, http: &str, body: &Value) -> String {
+    let r = c
+        .post(format!("http://{http}/v1/jobs"))
+        .json(body)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    r.json::<Value>().await.unwrap()["id"]
+        .as_str()
+        .unwrap()
+        .to_string()
+}
+
+/// The job's SSE stream, read until progress reaches step 100 (the job must not end first).
+async fn well_into_the_run(c: &reqwest::Client, url_job: &str) -> SseReader {
+    let mut sse = SseReader::new(c.get(format!("{url_job}/events")).send().await.unwrap());
+    loop {
+        let e = sse.next().await.expect("stream ended before progress");
+        if e.event == "progress" && e.json()["step"].as_u64().unwrap() >= 100 {
+            return sse;
+        }
+        assert_ne!(
+            e.event, "done",
+            "the job finished before it could be killed"
+        );
+    }
+}
+
+/// The states of a finished job's event log, checking it has one `done`.
+async fn states_of(c: &reqwest::Client, url_job: &str) -> Vec<String> {
+    let events = SseReader::new(c.get(format!("{url_job}/events")).send().await.unwrap())
+        .collect()
+        .await;
+    assert_eq!(events.iter().filter(|e| e.event == "done").count(), 1);
+    assert_eq!(
+        events.iter().filter(|e| e.event == "artifact").count(),
+        physnap::service::api::ARTIFACT_NAMES.len()
+    );
+    events
+        .iter()
+        .filter(|e| e.event == "state")
+        .map(|e| e.json()["state"].as_str().unwrap().to_string())
+        .collect()
+}
+
+/// An uninterrupted run of the same request through `http` gives the bytes `job` (served at
+/// `url_job`) has.
+async fn same_bytes_as_uninterrupted(
+    c: &reqwest::Client,
+    http: &str,
+    body: &Value,
+    job: &Value,
+    url_job: &str,
+) {
+    let id2 = submit(c, http, body).await;
+    let job2 = wait_done(c, &format!("http://{http}/v1/jobs/{id2}")).await;
+    assert_eq!(job2["attempt"], 1);
+    assert_eq!(glb_sha(job), glb_sha(&job2));
+    let bytes = c
+        .get(format!("{url_job}/artifacts/model.glb"))
+        .send()
+        .await
+        .unwrap()
+        .bytes()
+        .await
+        .unwrap();
+    use sha2::Digest as _;
+    assert_eq!(format!("{:x}", sha2::Sha256::digest(&bytes)), glb_sha(job));
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn kill_9_mid_run_then_restart_finishes_once_with_same_bytes() {
     kill_9_then_restart("sqlite", false).await;
@@ -109,41 +188,11 @@ async fn kill_9_then_restart(store: &str, shared: bool) {
     let root = tempfile::tempdir().unwrap();
     tiny_weights(&root.path().join("weights"));
     let c = reqwest::Client::new();
-    // The paper's 1000-step sampler: a long job that is surely still running at step 100.
-    let body = json!({"points": cloud(30), "seed": 11, "samples": 6, "resolution": 8,
-                      "sampler": "ddpm", "steps": 1000,
-                      "category": "Door", "w_pc": 0.0, "w_pen": 0.0, "w_mob": 0.0});
-
+    let body = long_job();
     let server = spawn_with(root.path(), "data", store, lease);
-    let r = c
-        .post(format!("http://{}/v1/jobs", server.http))
-        .json(&body)
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(r.status(), 202);
-    let id = r.json::<Value>().await.unwrap()["id"]
-        .as_str()
-        .unwrap()
-        .to_string();
-    // Wait until it is well into the run, then SIGKILL.
-    let mut sse = SseReader::new(
-        c.get(format!("http://{}/v1/jobs/{id}/events", server.http))
-            .send()
-            .await
-            .unwrap(),
-    );
-    loop {
-        let e = sse.next().await.expect("stream ended before progress");
-        if e.event == "progress" && e.json()["step"].as_u64().unwrap() >= 100 {
-            break;
-        }
-        assert_ne!(
-            e.event, "done",
-            "the job finished before it could be killed"
-        );
-    }
-    drop(sse);
+    let id = submit(&c, &server.http, &body).await;
+    // Well into the run, SIGKILL.
+    drop(well_into_the_run(&c, &format!("http://{}/v1/jobs/{id}", server.http)).await);
     drop(server); // kill -9 + wait
 
     let server = spawn_with(
@@ -156,50 +205,13 @@ async fn kill_9_then_restart(store: &str, shared: bool) {
     let job = wait_done(&c, &url).await;
     assert_eq!(job["state"], "SUCCEEDED", "{job:#}");
     assert_eq!(job["attempt"], 2, "{job:#}");
-    let events = SseReader::new(c.get(format!("{url}/events")).send().await.unwrap())
-        .collect()
-        .await;
-    let states: Vec<String> = events
-        .iter()
-        .filter(|e| e.event == "state")
-        .map(|e| e.json()["state"].as_str().unwrap().to_string())
-        .collect();
     let expected: &[&str] = if shared {
         &["QUEUED", "RUNNING", "RUNNING", "SUCCEEDED"]
     } else {
         &["QUEUED", "RUNNING", "QUEUED", "RUNNING", "SUCCEEDED"]
     };
-    assert_eq!(states, expected, "{states:?}");
-    assert_eq!(events.iter().filter(|e| e.event == "done").count(), 1);
-    assert_eq!(
-        events.iter().filter(|e| e.event == "artifact").count(),
-        physnap::service::api::ARTIFACT_NAMES.len()
-    );
-
-    // An uninterrupted run of the same request gives the same bytes.
-    let r = c
-        .post(format!("http://{}/v1/jobs", server.http))
-        .json(&body)
-        .send()
-        .await
-        .unwrap();
-    let id2 = r.json::<Value>().await.unwrap()["id"]
-        .as_str()
-        .unwrap()
-        .to_string();
-    let job2 = wait_done(&c, &format!("http://{}/v1/jobs/{id2}", server.http)).await;
-    assert_eq!(job2["attempt"], 1);
-    assert_eq!(glb_sha(&job), glb_sha(&job2));
-    let bytes = c
-        .get(format!("{url}/artifacts/model.glb"))
-        .send()
-        .await
-        .unwrap()
-        .bytes()
-        .await
-        .unwrap();
-    use sha2::Digest as _;
-    assert_eq!(format!("{:x}", sha2::Sha256::digest(&bytes)), glb_sha(&job));
+    assert_eq!(states_of(&c, &url).await, expected);
+    same_bytes_as_uninterrupted(&c, &server.http, &body, &job, &url).await;
     if shared {
         for data in ["data", "data2"] {
             assert!(!root.path().join(data).join("artifacts").exists());
@@ -288,51 +300,19 @@ async fn kill_9_of_a_worker_then_another_worker_finishes_its_job_once() {
     let root = tempfile::tempdir().unwrap();
     tiny_weights(&root.path().join("weights"));
     let c = reqwest::Client::new();
-    let body = json!({"points": cloud(30), "seed": 11, "samples": 6, "resolution": 8,
-                      "sampler": "ddpm", "steps": 1000,
-                      "category": "Door", "w_pc": 0.0, "w_pen": 0.0, "w_mob": 0.0});
-    let lease = ["--lease-seconds", "2"];
+    let body = long_job();
+    let worker_flags = ["--role", "worker", "--lease-seconds", "2"];
     let api = spawn_with(root.path(), "api", &url, &["--role", "api"]);
     assert_ne!(api.http, "-");
-    let worker = spawn_with(
-        root.path(),
-        "w1",
-        &url,
-        &[&["--role", "worker"][..], &lease[..]].concat(),
-    );
+    let worker = spawn_with(root.path(), "w1", &url, &worker_flags);
     assert_eq!(worker.http, "-", "a worker serves no API");
-    let r = c
-        .post(format!("http://{}/v1/jobs", api.http))
-        .json(&body)
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(r.status(), 202);
-    let id = r.json::<Value>().await.unwrap()["id"]
-        .as_str()
-        .unwrap()
-        .to_string();
+    let id = submit(&c, &api.http, &body).await;
     let url_job = format!("http://{}/v1/jobs/{id}", api.http);
     // The API replica streams the progress of the job running in the worker process.
-    let mut sse = SseReader::new(c.get(format!("{url_job}/events")).send().await.unwrap());
-    loop {
-        let e = sse.next().await.expect("stream ended before progress");
-        if e.event == "progress" && e.json()["step"].as_u64().unwrap() >= 100 {
-            break;
-        }
-        assert_ne!(
-            e.event, "done",
-            "the job finished before it could be killed"
-        );
-    }
+    let sse = well_into_the_run(&c, &url_job).await;
     let t_kill = Instant::now();
     drop(worker); // kill -9 + wait
-    let _worker2 = spawn_with(
-        root.path(),
-        "w2",
-        &url,
-        &[&["--role", "worker"][..], &lease[..]].concat(),
-    );
+    let _worker2 = spawn_with(root.path(), "w2", &url, &worker_flags);
     // The stream that was open goes on to the end, through the takeover.
     let rest = sse.collect().await;
     assert_eq!(rest.iter().filter(|e| e.event == "done").count(), 1);
@@ -343,46 +323,12 @@ async fn kill_9_of_a_worker_then_another_worker_finishes_its_job_once() {
     );
     assert_eq!(job["state"], "SUCCEEDED", "{job:#}");
     assert_eq!(job["attempt"], 2, "{job:#}");
-    let events = SseReader::new(c.get(format!("{url_job}/events")).send().await.unwrap())
-        .collect()
-        .await;
-    let states: Vec<String> = events
-        .iter()
-        .filter(|e| e.event == "state")
-        .map(|e| e.json()["state"].as_str().unwrap().to_string())
-        .collect();
     assert_eq!(
-        states,
-        ["QUEUED", "RUNNING", "RUNNING", "SUCCEEDED"],
-        "{states:?}"
+        states_of(&c, &url_job).await,
+        ["QUEUED", "RUNNING", "RUNNING", "SUCCEEDED"]
     );
-    assert_eq!(events.iter().filter(|e| e.event == "done").count(), 1);
-
-    // An uninterrupted run of the same request gives the same bytes, served by the API
-    // replica from the database.
-    let r = c
-        .post(format!("http://{}/v1/jobs", api.http))
-        .json(&body)
-        .send()
-        .await
-        .unwrap();
-    let id2 = r.json::<Value>().await.unwrap()["id"]
-        .as_str()
-        .unwrap()
-        .to_string();
-    let job2 = wait_done(&c, &format!("http://{}/v1/jobs/{id2}", api.http)).await;
-    assert_eq!(job2["attempt"], 1);
-    assert_eq!(glb_sha(&job), glb_sha(&job2));
-    let bytes = c
-        .get(format!("{url_job}/artifacts/model.glb"))
-        .send()
-        .await
-        .unwrap()
-        .bytes()
-        .await
-        .unwrap();
-    use sha2::Digest as _;
-    assert_eq!(format!("{:x}", sha2::Sha256::digest(&bytes)), glb_sha(&job));
+    // An uninterrupted run gives the same bytes, served by the API replica from the database.
+    same_bytes_as_uninterrupted(&c, &api.http, &body, &job, &url_job).await;
     for dir in ["api", "w1", "w2"] {
         assert!(!root.path().join(dir).join("artifacts").exists());
     }

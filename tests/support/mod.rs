@@ -243,3 +243,21 @@ pub async fn problem(resp: reqwest::Response, status: u16) -> serde_json::Value 
 pub fn data_dir(s: &TestServer) -> PathBuf {
     s.root.path().join("data")
 }
+
+/// Submit a JSON job to `s` (asserting 202); its id.
+pub async fn submit_json(c: &reqwest::Client, s: &TestServer, body: &serde_json::Value) -> String {
+    let r = c.post(s.url("/v1/jobs")).json(body).send().await.unwrap();
+    assert_eq!(r.status(), 202);
+    r.json::<serde_json::Value>().await.unwrap()["id"]
+        .as_str()
+        .unwrap()
+        .to_string()
+}
+
+/// Every event of job `id`'s SSE stream on `s`, to its end.
+pub async fn events_of(c: &reqwest::Client, s: &TestServer, id: &str) -> Vec<SseEvent> {
+    let url = s.url(&format!("/v1/jobs/{id}/events"));
+    SseReader::new(c.get(url).send().await.unwrap())
+        .collect()
+        .await
+}

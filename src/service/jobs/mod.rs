@@ -209,7 +209,7 @@ pub struct Service {
     /// Set when the store is shared with other processes (PostgreSQL): the queue is the
     /// store's, jobs run under leases, and news arrive by notification.
     shared: Option<Shared>,
-    /// Jobs this process runs under a lease (shared store): id → attempt.
+    /// Jobs this process runs under a lease (shared store).
     leased: Mutex<shared::Leased>,
     /// Counters.
     pub metrics: Metrics,

@@ -18,7 +18,7 @@
 //! [`JobStore::lease_next`]: crate::service::store::JobStore::lease_next
 //! [`JobStore::update_if`]: crate::service::store::JobStore::update_if
 
-use std::collections::HashMap;
+use std::collections::HashSet;
 use std::str::FromStr;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -252,7 +252,7 @@ impl Service {
     }
 
     fn runs_here(&self, id: &str) -> bool {
-        lock(&self.leased).contains_key(id)
+        lock(&self.leased).contains(id)
     }
 
     /// Lease and run jobs while slots are free.
@@ -311,7 +311,7 @@ impl Service {
         if cancel_requested {
             cancel.store(true, Ordering::Relaxed);
         }
-        lock(&self.leased).insert(rec.id.clone(), attempt);
+        lock(&self.leased).insert(rec.id.clone());
         let evs = state_events(&mut rec);
         let r2 = rec.clone();
         let id = rec.id.clone();
@@ -435,5 +435,5 @@ impl Service {
     }
 }
 
-/// Leases this process holds: job id → attempt.
-pub(super) type Leased = HashMap<String, u32>;
+/// The jobs this process runs under a lease.
+pub(super) type Leased = HashSet<String>;
